@@ -1,0 +1,1 @@
+//! Decoders (filled in).

@@ -1,0 +1,11 @@
+//! `looming`: looming (inverse time to contact) from LiDAR drive logs in MCAP.
+//!
+//! Pipeline stages, one module each:
+//! [`input`] (streaming MCAP reader) -> [`decode`] (typed messages) ->
+//! [`pairing`] (synchronised scan pairs) -> [`output`] (MCAP writer);
+//! [`pipeline`] wires them together on threads with bounded channels.
+
+pub mod decode;
+pub mod messages;
+pub mod pairing;
+pub mod ros;

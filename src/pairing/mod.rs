@@ -1,0 +1,1 @@
+//! Scan pairing (filled in).

@@ -1,0 +1,1 @@
+//! ROS wire formats (filled in).
