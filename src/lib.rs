@@ -6,6 +6,13 @@
 //! [`pipeline`] wires them together on threads with bounded channels.
 
 pub mod decode;
+pub mod fixtures;
+pub mod input;
+pub mod inspect;
 pub mod messages;
+pub mod output;
 pub mod pairing;
+pub mod pipeline;
 pub mod ros;
+pub mod ros_schemas;
+pub mod topics;

@@ -1,3 +1,19 @@
-fn main() {
-    println!("Hello, world!");
+//! The `looming` command line: argument parsing, progress, summaries and exit
+//! codes. All the work is in the library.
+
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    match cli::run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(failure) => {
+            eprintln!("error: {:#}", failure.error);
+            ExitCode::from(failure.code as u8)
+        }
+    }
 }

@@ -1,0 +1,291 @@
+//! Command-line arguments (clap derive: the doc comments are the help text) and
+//! the human-readable run summary.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use looming::decode::DecodeLimits;
+use looming::input::{InputOptions, ReadMode};
+use looming::output::{OutputCompression, OutputOptions};
+use looming::pipeline::{PairingSettings, ProcessConfig, ProcessError, ProgressSink, RunSummary};
+use looming::topics::TopicOverrides;
+
+const EXIT_CODES: &str = "\
+Exit codes:
+  0  success (bad messages, if any, were skipped and are counted in the summary)
+  1  failure: unreadable input, I/O error, output could not be written
+  2  usage: bad arguments, unknown or ambiguous topic, output exists (see --force)
+     or is the input
+  3  --strict and the input had a bad message, a bad chunk CRC or was truncated";
+
+/// Looming (inverse time to contact) from LiDAR drive logs in MCAP.
+///
+/// Reads the LiDAR point clouds and IMU / velocity channels of a log, pairs
+/// consecutive scans and writes a new MCAP holding every input record unchanged
+/// plus looming channels.
+#[derive(Debug, Parser)]
+#[command(name = "looming", version, after_help = EXIT_CODES)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Process a log: copy every record and add the /looming/* channels.
+    #[command(after_help = EXIT_CODES)]
+    Process(ProcessArgs),
+    /// Show a log's channels, schemas, counts, rates, time span and the topics
+    /// `process` would use.
+    #[command(after_help = EXIT_CODES)]
+    Inspect(InspectArgs),
+}
+
+#[derive(Debug, Args)]
+struct ProcessArgs {
+    /// Input MCAP file.
+    input: PathBuf,
+    /// Output MCAP file (written to a temporary file beside it, renamed when complete).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    force: bool,
+    /// Fail on the first bad input message, bad chunk CRC or truncation, instead
+    /// of skipping and counting it.
+    #[arg(long)]
+    strict: bool,
+    /// Check every chunk's CRC before using its messages (the indexed reader
+    /// does not; costs a second decompression).
+    #[arg(long)]
+    verify: bool,
+    /// LiDAR topic (sensor_msgs/PointCloud2 or foxglove.PointCloud); auto-detected
+    /// when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    lidar_topic: Option<String>,
+    /// IMU topic (sensor_msgs/Imu); auto-detected when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    imu_topic: Option<String>,
+    /// Velocity topic (geometry_msgs/TwistStamped or nav_msgs/Odometry);
+    /// auto-detected when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    velocity_topic: Option<String>,
+    /// Pose of the LiDAR in the velocity/IMU frame as x,y,z,qx,qy,qz,qw (metres,
+    /// unit quaternion); overrides /tf_static.
+    #[arg(long, value_name = "X,Y,Z,QX,QY,QZ,QW", allow_hyphen_values = true)]
+    extrinsic: Option<String>,
+    /// Largest stamp gap between two scans that is still paired, seconds
+    /// [default: 3 nominal scan periods].
+    #[arg(long, value_name = "SECONDS")]
+    max_gap: Option<f64>,
+    /// Reorder window for logs read in file order, seconds of log time.
+    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
+    reorder_window: f64,
+    /// Most points accepted in one scan (larger clouds are bad messages).
+    #[arg(long, value_name = "N", default_value_t = 4_000_000)]
+    max_points: usize,
+    /// Chunk compression of the output.
+    #[arg(long, value_enum, default_value_t = OutputCompression::Zstd)]
+    compression: OutputCompression,
+    /// Also write the run summary as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    json_summary: Option<PathBuf>,
+    /// No progress bar and no summary on stderr.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Debug, Args)]
+struct InspectArgs {
+    /// MCAP file to inspect.
+    file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// An error with its exit code.
+pub struct Failure {
+    pub error: anyhow::Error,
+    pub code: i32,
+}
+
+impl<E: Into<anyhow::Error>> From<E> for Failure {
+    fn from(error: E) -> Self {
+        Failure {
+            error: error.into(),
+            code: 1,
+        }
+    }
+}
+
+pub fn run(cli: Cli) -> Result<(), Failure> {
+    match cli.command {
+        Command::Process(args) => process(args),
+        Command::Inspect(args) => inspect(args),
+    }
+}
+
+fn inspect(args: InspectArgs) -> Result<(), Failure> {
+    let report = looming::inspect::inspect(&args.file)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    Ok(())
+}
+
+fn process(args: ProcessArgs) -> Result<(), Failure> {
+    let usage = |error: anyhow::Error| Failure { error, code: 2 };
+    if !(args.reorder_window.is_finite() && args.reorder_window >= 0.0) {
+        return Err(usage(anyhow::anyhow!("--reorder-window must be a non-negative number of seconds")));
+    }
+    if args.max_gap.is_some_and(|g| !(g.is_finite() && g > 0.0)) {
+        return Err(usage(anyhow::anyhow!("--max-gap must be a positive number of seconds")));
+    }
+    let config = ProcessConfig {
+        input: args.input.clone(),
+        output: args.output.clone(),
+        input_options: InputOptions {
+            verify_crc: args.verify,
+            reorder_window_ns: (args.reorder_window * 1e9) as u64,
+            ..InputOptions::default()
+        },
+        output_options: OutputOptions {
+            compression: args.compression,
+            force: args.force,
+            ..OutputOptions::default()
+        },
+        topics: TopicOverrides {
+            lidar: args.lidar_topic.clone(),
+            imu: args.imu_topic.clone(),
+            velocity: args.velocity_topic.clone(),
+        },
+        pairing: PairingSettings {
+            max_gap_s: args.max_gap,
+            extrinsic: args.extrinsic.clone(),
+            ..PairingSettings::default()
+        },
+        strict: args.strict,
+        decode_limits: DecodeLimits {
+            max_points: args.max_points,
+        },
+    };
+    let progress = Progress::new(args.quiet);
+    let result = looming::pipeline::process(&config, &progress);
+    progress.bar.finish_and_clear();
+    let summary = result.map_err(|error| {
+        let code = match &error {
+            ProcessError::Topic { .. } | ProcessError::Config(_) => 2,
+            ProcessError::Output(
+                looming::output::OutputError::Exists { .. } | looming::output::OutputError::SameAsInput { .. },
+            ) => 2,
+            ProcessError::Strict(_) => 3,
+            _ => 1,
+        };
+        Failure {
+            error: error.into(),
+            code,
+        }
+    })?;
+    if let Some(path) = &args.json_summary {
+        let json = serde_json::to_string_pretty(&summary)?;
+        std::fs::write(path, json).with_context(|| format!("{}: cannot write the JSON summary", path.display()))?;
+    }
+    if !args.quiet {
+        eprint!("{}", summary_text(&summary));
+    }
+    Ok(())
+}
+
+/// indicatif progress on stderr when it is a terminal, silent otherwise.
+struct Progress {
+    bar: ProgressBar,
+}
+
+impl Progress {
+    fn new(quiet: bool) -> Self {
+        let bar = if quiet || !std::io::stderr().is_terminal() {
+            ProgressBar::hidden()
+        } else {
+            let bar = ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} messages ({per_sec}, eta {eta})")
+                    .expect("static template is valid"),
+            );
+            bar
+        };
+        Self { bar }
+    }
+}
+
+impl ProgressSink for Progress {
+    fn update(&self, done: u64, total: Option<u64>) {
+        if let Some(total) = total {
+            self.bar.set_length(total.max(done));
+        }
+        self.bar.set_position(done);
+    }
+}
+
+/// The one-screen summary.
+fn summary_text(s: &RunSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let mode = match &s.read {
+        ReadMode::Indexed => "indexed, log-time order".to_string(),
+        ReadMode::Linear { reason } => format!("linear, file order with reorder window ({reason})"),
+    };
+    let mb = |b: u64| b as f64 / 1e6;
+    let _ = writeln!(out, "looming {}: {} -> {}", s.tool_version, s.input, s.output);
+    let _ = writeln!(out, "  read          {mode}");
+    let _ = writeln!(
+        out,
+        "  copied        {} messages, {} metadata, {} attachments",
+        s.messages_copied, s.metadata_copied, s.attachments_copied
+    );
+    let topic = |c: &Option<looming::topics::SelectedChannel>| c.as_ref().map_or("none".to_string(), |c| c.topic.clone());
+    let _ = writeln!(
+        out,
+        "  topics        lidar {}, imu {}, velocity {}, tf {}",
+        s.topics.lidar.topic,
+        topic(&s.topics.imu),
+        topic(&s.topics.velocity),
+        s.topics.tf.len()
+    );
+    let _ = writeln!(
+        out,
+        "  decoded       {} scans ({} points, {} invalid skipped), {} imu, {} velocity, {} tf",
+        s.decoded.scans, s.decoded.lidar_points, s.decoded.invalid_points_skipped, s.decoded.imu, s.decoded.velocity, s.decoded.tf_messages
+    );
+    let p = &s.pairing;
+    let _ = writeln!(
+        out,
+        "  pairs         {} written; skipped: {} dt<=0, {} gaps; {} without velocity, {} without imu",
+        s.pairs_written, p.skipped_nonpositive_dt, p.skipped_gap, p.pairs_without_velocity, p.pairs_without_imu
+    );
+    let _ = writeln!(out, "  bad messages  {}", s.bad_messages);
+    for bad in s.bad_message_examples.iter().take(5) {
+        let _ = writeln!(out, "    {bad}");
+    }
+    if s.bad_messages > 5 {
+        let _ = writeln!(out, "    ... (all of them in --json-summary)");
+    }
+    for warning in &s.warnings {
+        let _ = writeln!(out, "  warning       {warning}");
+    }
+    let _ = writeln!(
+        out,
+        "  size          {:.1} MB -> {:.1} MB in {:.2} s ({:.1} MB/s)",
+        mb(s.input_bytes),
+        mb(s.output_bytes),
+        s.elapsed_s,
+        mb(s.input_bytes) / s.elapsed_s.max(1e-9)
+    );
+    out
+}

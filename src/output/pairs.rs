@@ -1,0 +1,99 @@
+//! `/looming/pairs`: one JSON message per scan pair (schema
+//! `schemas/looming.ScanPair.schema.json`).
+
+use serde::Serialize;
+
+use super::OwnChannelSpec;
+use crate::messages::Scan;
+use crate::pairing::ScanPair;
+
+pub const PAIRS_TOPIC: &str = "/looming/pairs";
+const PAIRS_SCHEMA: &str = include_str!("../../schemas/looming.ScanPair.schema.json");
+
+/// The channel and schema of `/looming/pairs`.
+pub fn pairs_channel_spec() -> OwnChannelSpec {
+    OwnChannelSpec {
+        topic: PAIRS_TOPIC.into(),
+        schema_name: "looming.ScanPair".into(),
+        schema_encoding: "jsonschema".into(),
+        schema_data: PAIRS_SCHEMA.as_bytes().to_vec(),
+        message_encoding: "json".into(),
+    }
+}
+
+/// One `/looming/pairs` message.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct PairRecord {
+    pub index: u64,
+    pub previous: ScanRecord,
+    pub current: ScanRecord,
+    pub dt_s: f64,
+    pub velocity_lidar_mps: Option<[f64; 3]>,
+    pub angular_velocity_lidar_radps: Option<[f64; 3]>,
+    pub speed_mps: Option<f64>,
+    pub unavailable: Vec<String>,
+    pub extrinsic: ExtrinsicRecord,
+}
+
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct ScanRecord {
+    pub stamp_ns: i64,
+    pub log_time_ns: u64,
+    pub frame_id: String,
+    pub points: u64,
+    pub invalid_points: u64,
+    pub per_point_time: bool,
+    pub ring: bool,
+}
+
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct ExtrinsicRecord {
+    pub velocity: Option<String>,
+    pub imu: Option<String>,
+}
+
+impl ScanRecord {
+    fn new(scan: &Scan, log_time_ns: u64) -> Self {
+        Self {
+            stamp_ns: scan.stamp_ns,
+            log_time_ns,
+            frame_id: scan.frame_id.clone(),
+            points: scan.points_m.len() as u64,
+            invalid_points: u64::from(scan.skipped_invalid_points),
+            per_point_time: scan.time_offset_s.is_some(),
+            ring: scan.ring.is_some(),
+        }
+    }
+}
+
+impl PairRecord {
+    pub fn from_pair(pair: &ScanPair) -> Self {
+        let at = pair.current.stamp_ns;
+        let velocity = pair.motion.velocity_at(at);
+        let angular = pair.motion.angular_velocity_at(at);
+        let mut unavailable = Vec::new();
+        if velocity.is_none() {
+            unavailable.push("velocity".to_string());
+        }
+        if !pair.motion.has_imu() {
+            unavailable.push("imu".to_string());
+        }
+        if angular.is_none() {
+            unavailable.push("angular_velocity".to_string());
+        }
+        Self {
+            index: pair.index,
+            previous: ScanRecord::new(&pair.previous, pair.previous_log_time_ns),
+            current: ScanRecord::new(&pair.current, pair.current_log_time_ns),
+            dt_s: pair.dt_s,
+            velocity_lidar_mps: velocity.map(|v| [v.x, v.y, v.z]),
+            angular_velocity_lidar_radps: angular.map(|w| [w.x, w.y, w.z]),
+            speed_mps: velocity.map(|v| v.norm()),
+            unavailable,
+            extrinsic: ExtrinsicRecord {
+                velocity: pair.motion.velocity_extrinsic_source(),
+                imu: pair.motion.imu_extrinsic_source(),
+            },
+        }
+    }
+}

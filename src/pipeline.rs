@@ -1,0 +1,557 @@
+//! Wires the stages together: reader+decoder thread -> pairing thread -> writer
+//! (the calling thread), with bounded channels between them so every stage
+//! works at once while memory stays bounded. A single ordered chain of channels
+//! makes the output deterministic: the same input and options give the same
+//! bytes.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::time::Instant;
+
+use crate::decode::{self, DecodeLimits};
+use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
+use crate::messages::Decoded;
+use crate::output::pairs::{PairRecord, pairs_channel_spec};
+use crate::output::{OutputError, OutputOptions, OutputWriter, check_output_path};
+use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
+use crate::topics::{Role, SelectedChannel, TopicError, TopicOverrides, TopicSelection, select};
+
+/// Items between the reader and pairing stages. Channels hold few items: point
+/// clouds are megabytes each.
+const STAGE_QUEUE_LEN: usize = 32;
+
+/// Everything `looming process` needs to know.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ProcessConfig {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub input_options: InputOptions,
+    pub output_options: OutputOptions,
+    pub topics: TopicOverrides,
+    pub pairing: PairingSettings,
+    /// Any bad input message, or chunk CRC mismatch, fails the run.
+    pub strict: bool,
+    #[serde(skip)]
+    pub decode_limits: DecodeLimits,
+}
+
+/// Pairing options from the command line.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PairingSettings {
+    /// Largest stamp gap paired, seconds; default: `max_gap_periods` nominal periods.
+    pub max_gap_s: Option<f64>,
+    pub max_gap_periods: f64,
+    /// LiDAR pose in the motion frame, `x,y,z,qx,qy,qz,qw`, overriding `/tf_static`.
+    pub extrinsic: Option<String>,
+    /// How long a motion sample may be held past the end of its series, seconds.
+    pub motion_hold_s: f64,
+}
+
+impl Default for PairingSettings {
+    fn default() -> Self {
+        Self {
+            max_gap_s: None,
+            max_gap_periods: 3.0,
+            extrinsic: None,
+            motion_hold_s: 0.2,
+        }
+    }
+}
+
+/// A bad input message: skipped and counted (fatal with `--strict`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BadMessage {
+    pub file: String,
+    pub topic: String,
+    pub log_time_ns: u64,
+    pub reason: String,
+}
+
+impl std::fmt::Display for BadMessage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: topic {} at log time {} ({}): {}",
+            self.file,
+            self.topic,
+            self.log_time_ns,
+            format_log_time(self.log_time_ns),
+            self.reason
+        )
+    }
+}
+
+/// Log time as seconds.nanoseconds, as `mcap cat` prints it.
+pub fn format_log_time(log_time_ns: u64) -> String {
+    format!("{}.{:09} s", log_time_ns / 1_000_000_000, log_time_ns % 1_000_000_000)
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessError {
+    #[error(transparent)]
+    Input(#[from] InputError),
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    #[error("{path}: {source}")]
+    Topic { path: PathBuf, source: TopicError },
+    #[error("invalid option: {0}")]
+    Config(String),
+    #[error("bad input (strict mode): {0}")]
+    Strict(String),
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+/// Progress reports from the writer: messages copied so far and the total
+/// expected, when known.
+pub trait ProgressSink: Sync {
+    fn update(&self, messages_done: u64, messages_total: Option<u64>);
+}
+
+/// No progress output.
+pub struct NoProgress;
+impl ProgressSink for NoProgress {
+    fn update(&self, _: u64, _: Option<u64>) {}
+}
+
+/// What a run did, for the one-screen summary and `--json-summary`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunSummary {
+    pub tool_version: String,
+    pub input: String,
+    pub output: String,
+    pub read: ReadMode,
+    pub topics: TopicSelection,
+    pub messages_copied: u64,
+    pub metadata_copied: u64,
+    pub attachments_copied: u64,
+    pub decoded: DecodedCounts,
+    pub pairs_written: u64,
+    pub pairing: PairingStats,
+    pub bad_messages: u64,
+    pub bad_messages_by_topic: BTreeMap<String, u64>,
+    /// The first few bad messages, in full.
+    pub bad_message_examples: Vec<BadMessage>,
+    pub input_report: ReadReport,
+    pub warnings: Vec<String>,
+    pub input_bytes: u64,
+    pub output_bytes: u64,
+    pub elapsed_s: f64,
+}
+
+/// Messages decoded per role.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct DecodedCounts {
+    pub scans: u64,
+    pub lidar_points: u64,
+    pub invalid_points_skipped: u64,
+    pub imu: u64,
+    pub velocity: u64,
+    pub tf_messages: u64,
+}
+
+const BAD_MESSAGE_EXAMPLES: usize = 20;
+
+/// Run `looming process`.
+pub fn process(config: &ProcessConfig, progress: &dyn ProgressSink) -> Result<RunSummary, ProcessError> {
+    let started = Instant::now();
+    check_output_path(&config.input, &config.output, config.output_options.force)?;
+    let cli_extrinsic = match &config.pairing.extrinsic {
+        Some(text) => Some(
+            crate::pairing::parse_extrinsic(text).map_err(|e| ProcessError::Config(format!("--extrinsic: {e}")))?,
+        ),
+        None => None,
+    };
+    let mut input = InputFile::open(&config.input, config.input_options.clone())?;
+    let mut restarted_because = None;
+    loop {
+        let topics = select(input.catalog(), &config.topics).map_err(|source| ProcessError::Topic {
+            path: config.input.clone(),
+            source,
+        })?;
+        let outcome = run_once(config, &input, &topics, cli_extrinsic, progress)?;
+        // IndexedReader silently skips messages outside chunks: if the count
+        // disagrees with the statistics, read the file linearly instead.
+        let expected = input.expected_messages();
+        if *input.mode() == ReadMode::Indexed
+            && expected.is_some_and(|n| n != outcome.summary_counts.messages)
+            && outcome.report.bad_crc_chunks == 0
+        {
+            let reason = format!(
+                "the chunk indexes yielded {} messages but the statistics count {}",
+                outcome.summary_counts.messages,
+                expected.unwrap_or(0)
+            );
+            drop(outcome.writer);
+            restarted_because = Some(reason.clone());
+            input.force_linear(reason)?;
+            continue;
+        }
+        return finish_run(config, &input, topics, outcome, started, restarted_because);
+    }
+}
+
+/// The result of one pass before the output is finalised.
+struct PassOutcome {
+    writer: OutputWriter,
+    report: ReadReport,
+    summary_counts: WriterCounts,
+    pairing: PairingOutcome,
+}
+
+#[derive(Debug, Default, Clone, Copy)]
+struct WriterCounts {
+    messages: u64,
+    metadata: u64,
+    attachments: u64,
+    own_messages: u64,
+}
+
+/// Items from the reader+decoder stage.
+enum FromReader {
+    Record(InputRecord),
+    Decoded { log_time_ns: u64, decoded: Decoded },
+    Bad(BadMessage),
+}
+
+/// Items for the writer.
+enum ToWriter {
+    Input(InputRecord),
+    Own {
+        channel_id: u16,
+        sequence: u32,
+        log_time_ns: u64,
+        data: Vec<u8>,
+    },
+}
+
+fn run_once(
+    config: &ProcessConfig,
+    input: &InputFile,
+    topics: &TopicSelection,
+    cli_extrinsic: Option<nalgebra::Isometry3<f64>>,
+    progress: &dyn ProgressSink,
+) -> Result<PassOutcome, ProcessError> {
+    let mut writer = OutputWriter::create(&config.output, &config.output_options, input.catalog())?;
+    let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
+    let pairing_config = PairingConfig {
+        max_gap_periods: config.pairing.max_gap_periods,
+        max_gap_s: config.pairing.max_gap_s,
+        cli_extrinsic,
+        has_velocity_source: topics.velocity.is_some(),
+        has_imu_source: topics.imu.is_some(),
+        motion_hold_s: config.pairing.motion_hold_s,
+    };
+    let nominal_period_s = input.catalog().nominal_period_s(topics.lidar.channel_id);
+    let (reader_tx, reader_rx) = sync_channel::<FromReader>(STAGE_QUEUE_LEN);
+    let (writer_tx, writer_rx) = sync_channel::<ToWriter>(STAGE_QUEUE_LEN);
+    std::thread::scope(|scope| {
+        let reader = scope.spawn(|| read_and_decode(config, input, topics, reader_tx));
+        let pairing = scope.spawn(move || {
+            let mut pairer = ScanPairer::new(pairing_config);
+            pairer.set_nominal_period_s(nominal_period_s);
+            pair_scans(pairer, pairs_channel, reader_rx, writer_tx)
+        });
+        let written = write_all(&mut writer, writer_rx, input.expected_messages(), progress);
+        let read = reader
+            .join()
+            .map_err(|_| ProcessError::Internal("the reader thread panicked".into()))?;
+        let pairing = pairing
+            .join()
+            .map_err(|_| ProcessError::Internal("the pairing thread panicked".into()))?;
+        // The writer's error explains a reader that was stopped.
+        let counts = written?;
+        let report = read?;
+        Ok(PassOutcome {
+            writer,
+            report,
+            summary_counts: counts,
+            pairing,
+        })
+    })
+}
+
+/// Stage 1: read records and decode the selected topics.
+fn read_and_decode(
+    config: &ProcessConfig,
+    input: &InputFile,
+    topics: &TopicSelection,
+    tx: SyncSender<FromReader>,
+) -> Result<ReadReport, ProcessError> {
+    let by_channel: HashMap<u16, &SelectedChannel> = topics.all().map(|c| (c.channel_id, c)).collect();
+    let file_name = input.path().display().to_string();
+    let mut strict_failure: Option<BadMessage> = None;
+    let mut sink = |record: InputRecord| -> Flow {
+        let decoded = match &record {
+            InputRecord::Message(message) => by_channel.get(&message.channel_id).map(|channel| {
+                let is_static = channel.role == Role::TfStatic;
+                decode::decode(channel.kind, channel.encoding, is_static, &message.data, &config.decode_limits)
+                    .map(|decoded| (message.log_time_ns, decoded))
+                    .map_err(|err| BadMessage {
+                        file: file_name.clone(),
+                        topic: channel.topic.clone(),
+                        log_time_ns: message.log_time_ns,
+                        reason: err.to_string(),
+                    })
+            }),
+            _ => None,
+        };
+        if tx.send(FromReader::Record(record)).is_err() {
+            return Flow::Break(());
+        }
+        let item = match decoded {
+            None => return Flow::Continue(()),
+            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded { log_time_ns, decoded },
+            Some(Err(bad)) if config.strict => {
+                strict_failure = Some(bad);
+                return Flow::Break(());
+            }
+            Some(Err(bad)) => FromReader::Bad(bad),
+        };
+        if tx.send(item).is_err() {
+            return Flow::Break(());
+        }
+        Flow::Continue(())
+    };
+    let result = input.read_records(config.strict, &mut sink);
+    if let Some(bad) = strict_failure {
+        return Err(ProcessError::Strict(bad.to_string()));
+    }
+    let report = result.map_err(|error| match error {
+        InputError::BadChunk { .. } if config.strict => ProcessError::Strict(error.to_string()),
+        error => error.into(),
+    })?;
+    if config.strict
+        && let Some(reason) = &report.truncated
+    {
+        return Err(ProcessError::Strict(format!("{file_name}: {reason}")));
+    }
+    Ok(report)
+}
+
+/// What the pairing stage saw.
+#[derive(Debug, Default)]
+struct PairingOutcome {
+    decoded: DecodedCounts,
+    stats: Option<PairingStats>,
+    pairs_written: u64,
+    bad_messages: u64,
+    bad_by_topic: BTreeMap<String, u64>,
+    bad_examples: Vec<BadMessage>,
+    warnings: Vec<String>,
+}
+
+/// Stage 2: feed the pairer, pass every record on, add `/looming/pairs`.
+fn pair_scans(
+    mut pairer: ScanPairer,
+    pairs_channel: u16,
+    rx: Receiver<FromReader>,
+    tx: SyncSender<ToWriter>,
+) -> PairingOutcome {
+    let mut outcome = PairingOutcome::default();
+    for item in rx {
+        let events = match item {
+            FromReader::Record(record) => {
+                if tx.send(ToWriter::Input(record)).is_err() {
+                    break;
+                }
+                continue;
+            }
+            FromReader::Bad(bad) => {
+                outcome.bad_messages += 1;
+                *outcome.bad_by_topic.entry(bad.topic.clone()).or_default() += 1;
+                if outcome.bad_examples.len() < BAD_MESSAGE_EXAMPLES {
+                    outcome.bad_examples.push(bad);
+                }
+                continue;
+            }
+            FromReader::Decoded { log_time_ns, decoded } => feed(&mut pairer, &mut outcome.decoded, log_time_ns, decoded),
+        };
+        if !emit(events, pairs_channel, &mut outcome, &tx) {
+            break;
+        }
+    }
+    let events = pairer.finish();
+    emit(events, pairs_channel, &mut outcome, &tx);
+    outcome.stats = Some(pairer.stats().clone());
+    outcome
+}
+
+fn feed(pairer: &mut ScanPairer, counts: &mut DecodedCounts, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
+    match decoded {
+        Decoded::Scan(scan) => {
+            counts.scans += 1;
+            counts.lidar_points += scan.points_m.len() as u64;
+            counts.invalid_points_skipped += u64::from(scan.skipped_invalid_points);
+            pairer.push_scan(log_time_ns, Arc::new(scan))
+        }
+        Decoded::Imu(sample) => {
+            counts.imu += 1;
+            pairer.push_imu(log_time_ns, sample)
+        }
+        Decoded::Velocity(sample) => {
+            counts.velocity += 1;
+            pairer.push_velocity(log_time_ns, sample)
+        }
+        Decoded::Transforms { transforms, is_static } => {
+            counts.tf_messages += 1;
+            pairer.push_transforms(&transforms, is_static);
+            Vec::new()
+        }
+    }
+}
+
+/// Send the pairer's events on; false when the writer has gone.
+fn emit(events: Vec<PairEvent>, pairs_channel: u16, outcome: &mut PairingOutcome, tx: &SyncSender<ToWriter>) -> bool {
+    for event in events {
+        match event {
+            PairEvent::Pair(pair) => {
+                let record = PairRecord::from_pair(&pair);
+                let data = serde_json::to_vec(&record).expect("pair records always serialise");
+                let item = ToWriter::Own {
+                    channel_id: pairs_channel,
+                    sequence: outcome.pairs_written as u32,
+                    log_time_ns: pair.current_log_time_ns,
+                    data,
+                };
+                outcome.pairs_written += 1;
+                if tx.send(item).is_err() {
+                    return false;
+                }
+            }
+            PairEvent::Warning(warning) => outcome.warnings.push(warning),
+        }
+    }
+    true
+}
+
+/// Stage 3 (calling thread): write everything, reporting progress.
+fn write_all(
+    writer: &mut OutputWriter,
+    rx: Receiver<ToWriter>,
+    total: Option<u64>,
+    progress: &dyn ProgressSink,
+) -> Result<WriterCounts, ProcessError> {
+    let mut counts = WriterCounts::default();
+    for item in rx {
+        match item {
+            ToWriter::Input(InputRecord::Message(message)) => {
+                writer.write_input_message(&message)?;
+                counts.messages += 1;
+                if counts.messages % 512 == 0 {
+                    progress.update(counts.messages, total);
+                }
+            }
+            ToWriter::Input(InputRecord::Metadata(metadata)) => {
+                writer.write_metadata(&metadata)?;
+                counts.metadata += 1;
+            }
+            ToWriter::Input(InputRecord::Attachment(attachment)) => {
+                writer.write_attachment(&attachment)?;
+                counts.attachments += 1;
+            }
+            ToWriter::Own {
+                channel_id,
+                sequence,
+                log_time_ns,
+                data,
+            } => {
+                writer.write_own_message(channel_id, sequence, log_time_ns, &data)?;
+                counts.own_messages += 1;
+            }
+        }
+    }
+    progress.update(counts.messages, total);
+    Ok(counts)
+}
+
+fn finish_run(
+    config: &ProcessConfig,
+    input: &InputFile,
+    topics: TopicSelection,
+    outcome: PassOutcome,
+    started: Instant,
+    restarted_because: Option<String>,
+) -> Result<RunSummary, ProcessError> {
+    let PassOutcome {
+        mut writer,
+        report,
+        summary_counts,
+        pairing,
+    } = outcome;
+    let stats = pairing.stats.clone().unwrap_or_default();
+    writer.write_metadata(&run_metadata(config, input, &topics, &stats))?;
+    let output_bytes = writer.finish()?;
+    let mut warnings: Vec<String> = Vec::new();
+    if let ReadMode::Linear { reason } = input.mode() {
+        warnings.push(format!("read linearly in file order ({reason})"));
+    }
+    if let Some(reason) = restarted_because {
+        warnings.push(format!("restarted the indexed read as a linear read: {reason}"));
+    }
+    warnings.extend(report.warnings.iter().map(|w| w.message.clone()));
+    warnings.extend(pairing.warnings.iter().cloned());
+    Ok(RunSummary {
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        input: config.input.display().to_string(),
+        output: config.output.display().to_string(),
+        read: input.mode().clone(),
+        topics,
+        messages_copied: summary_counts.messages,
+        metadata_copied: summary_counts.metadata,
+        attachments_copied: summary_counts.attachments,
+        decoded: pairing.decoded,
+        pairs_written: pairing.pairs_written,
+        pairing: stats,
+        bad_messages: pairing.bad_messages,
+        bad_messages_by_topic: pairing.bad_by_topic,
+        bad_message_examples: pairing.bad_examples,
+        input_report: report,
+        warnings,
+        input_bytes: file_size(&config.input),
+        output_bytes,
+        elapsed_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The `looming` metadata record: tool version and the fully resolved
+/// configuration. Holds nothing that changes between identical runs.
+fn run_metadata(
+    config: &ProcessConfig,
+    input: &InputFile,
+    topics: &TopicSelection,
+    stats: &PairingStats,
+) -> mcap::records::Metadata {
+    let input_name = config
+        .input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let resolved = serde_json::json!({
+        "input_file": input_name,
+        "read": input.mode(),
+        "topics": topics,
+        "strict": config.strict,
+        "verify_crc": config.input_options.verify_crc,
+        "reorder_window_s": config.input_options.reorder_window_ns as f64 * 1e-9,
+        "pairing": config.pairing,
+        "extrinsic_source": stats.extrinsic_source,
+        "nominal_period_s": stats.nominal_period_s,
+        "output": config.output_options,
+        "max_points_per_scan": config.decode_limits.max_points,
+    });
+    let mut metadata = BTreeMap::new();
+    metadata.insert("tool".to_string(), "looming".to_string());
+    metadata.insert("version".to_string(), env!("CARGO_PKG_VERSION").to_string());
+    metadata.insert("config".to_string(), resolved.to_string());
+    mcap::records::Metadata {
+        name: "looming".into(),
+        metadata,
+    }
+}
+
+fn file_size(path: &Path) -> u64 {
+    std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+}

@@ -1,0 +1,173 @@
+//! Helpers shared by the integration tests: build logs on disk, run the real
+//! `looming` binary, and read outputs back with an independent reader
+//! (`mcap::MessageStream`, a linear pass: not the code under test).
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+pub use looming::fixtures::{DriveSpec, Encoding, Layout, drive_log};
+
+/// A message as an independent reader sees it.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct RawMessage {
+    pub channel_id: u16,
+    pub sequence: u32,
+    pub log_time: u64,
+    pub publish_time: u64,
+    pub data: Vec<u8>,
+}
+
+/// Everything in a file, read linearly.
+pub struct FileContents {
+    pub profile: String,
+    pub messages: Vec<RawMessage>,
+    pub channels: BTreeMap<u16, (String, String, Option<(u16, String, String, Vec<u8>)>)>,
+    pub metadata: Vec<mcap::records::Metadata>,
+    pub attachments: Vec<(String, String, u64, u64, Vec<u8>)>,
+}
+
+impl FileContents {
+    pub fn topic_messages(&self, topic: &str) -> Vec<&RawMessage> {
+        let ids: Vec<u16> = self
+            .channels
+            .iter()
+            .filter(|(_, (t, _, _))| t == topic)
+            .map(|(id, _)| *id)
+            .collect();
+        self.messages.iter().filter(|m| ids.contains(&m.channel_id)).collect()
+    }
+}
+
+/// Read every record of `bytes` with the mcap crate's linear reader, checking
+/// CRCs, and fail the test on any error (a valid, complete MCAP).
+pub fn read_all(bytes: &[u8]) -> FileContents {
+    use mcap::records::Record;
+    let mut contents = FileContents {
+        profile: String::new(),
+        messages: Vec::new(),
+        channels: BTreeMap::new(),
+        metadata: Vec::new(),
+        attachments: Vec::new(),
+    };
+    let mut schemas: BTreeMap<u16, (u16, String, String, Vec<u8>)> = BTreeMap::new();
+    for record in mcap::read::LinearReader::new(bytes).expect("valid magic") {
+        match record.expect("every record of the output parses and its CRCs match") {
+            Record::Header(header) => contents.profile = header.profile,
+            Record::Schema { header, data } => {
+                schemas.insert(header.id, (header.id, header.name, header.encoding, data.into_owned()));
+            }
+            Record::Channel(channel) => {
+                let schema = schemas.get(&channel.schema_id).cloned();
+                contents
+                    .channels
+                    .insert(channel.id, (channel.topic, channel.message_encoding, schema));
+            }
+            Record::Message { header, data } => contents.messages.push(RawMessage {
+                channel_id: header.channel_id,
+                sequence: header.sequence,
+                log_time: header.log_time,
+                publish_time: header.publish_time,
+                data: data.into_owned(),
+            }),
+            Record::Metadata(metadata) => contents.metadata.push(metadata),
+            Record::Attachment { header, data, .. } => contents.attachments.push((
+                header.name,
+                header.media_type,
+                header.log_time,
+                header.create_time,
+                data.into_owned(),
+            )),
+            Record::Chunk { header, data } => {
+                let inner = decompress_chunk(&header, &data);
+                for inner_record in mcap::read::LinearReader::sans_magic(&inner) {
+                    match inner_record.expect("records inside chunks parse") {
+                        Record::Schema { header, data } => {
+                            schemas.insert(header.id, (header.id, header.name, header.encoding, data.into_owned()));
+                        }
+                        Record::Channel(channel) => {
+                            let schema = schemas.get(&channel.schema_id).cloned();
+                            contents
+                                .channels
+                                .insert(channel.id, (channel.topic, channel.message_encoding, schema));
+                        }
+                        Record::Message { header, data } => contents.messages.push(RawMessage {
+                            channel_id: header.channel_id,
+                            sequence: header.sequence,
+                            log_time: header.log_time,
+                            publish_time: header.publish_time,
+                            data: data.into_owned(),
+                        }),
+                        _ => {}
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    contents
+}
+
+fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Vec<u8> {
+    use std::io::Read;
+    let out = match header.compression.as_str() {
+        "" => data.to_vec(),
+        "zstd" => zstd::decode_all(data).expect("zstd chunk"),
+        "lz4" => {
+            let mut out = Vec::new();
+            lz4::Decoder::new(data).unwrap().read_to_end(&mut out).unwrap();
+            out
+        }
+        other => panic!("unexpected compression {other}"),
+    };
+    if header.uncompressed_crc != 0 {
+        assert_eq!(crc32fast::hash(&out), header.uncompressed_crc, "chunk CRC");
+    }
+    out
+}
+
+/// A scratch directory for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir()
+        .join("looming-tests")
+        .join(format!("{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub fn write(path: &Path, bytes: &[u8]) {
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// Run the real binary.
+pub fn looming(args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_looming"))
+        .args(args)
+        .output()
+        .expect("the looming binary runs")
+}
+
+pub fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// Assert that every message of `input` is in `output`, unchanged (as a multiset).
+pub fn assert_all_input_messages_copied(input: &FileContents, output: &FileContents) {
+    let input_ids: Vec<u16> = input.channels.keys().copied().collect();
+    let mut expected = input.messages.clone();
+    let mut actual: Vec<RawMessage> = output
+        .messages
+        .iter()
+        .filter(|m| input_ids.contains(&m.channel_id))
+        .cloned()
+        .collect();
+    expected.sort();
+    actual.sort();
+    assert_eq!(expected.len(), actual.len(), "number of copied input messages");
+    assert!(expected == actual, "copied messages differ from the input");
+    for (id, channel) in &input.channels {
+        assert_eq!(output.channels.get(id), Some(channel), "channel {id} copied with its schema under the same ids");
+    }
+}
