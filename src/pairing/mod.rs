@@ -1,1 +1,3 @@
-//! Scan pairing (filled in).
+//! Scan pairing: synchronised pairs of consecutive scans with ego motion.
+
+pub mod frames;
