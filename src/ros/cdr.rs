@@ -441,7 +441,11 @@ mod tests {
         );
         assert!(matches!(
             CdrReader::new(&[0, 1]).unwrap_err(),
-            DecodeError::Truncated { need: 4, have: 2, .. }
+            DecodeError::Truncated {
+                need: 4,
+                have: 2,
+                ..
+            }
         ));
     }
 

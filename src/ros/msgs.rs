@@ -394,14 +394,16 @@ pub fn pointcloud2_from_points(
         PointField::new("z", 8, datatype::FLOAT32),
     ];
     let mut step = 12u32;
-    let mut add = |fields: &mut Vec<PointField>, name: &str, datatype: u8, size: u32, align: u32| {
-        step = step.div_ceil(align) * align;
-        let offset = step;
-        fields.push(PointField::new(name, offset, datatype));
-        step += size;
-        offset as usize
-    };
-    let intensity_off = intensity.map(|v| (add(&mut fields, "intensity", datatype::FLOAT32, 4, 4), v));
+    let mut add =
+        |fields: &mut Vec<PointField>, name: &str, datatype: u8, size: u32, align: u32| {
+            step = step.div_ceil(align) * align;
+            let offset = step;
+            fields.push(PointField::new(name, offset, datatype));
+            step += size;
+            offset as usize
+        };
+    let intensity_off =
+        intensity.map(|v| (add(&mut fields, "intensity", datatype::FLOAT32, 4, 4), v));
     let ring_off = ring.map(|v| (add(&mut fields, "ring", datatype::UINT16, 2, 2), v));
     // Time stays 4-byte aligned after the u16 ring, as in the Velodyne driver.
     let time_off = time_s.map(|v| (add(&mut fields, "time", datatype::FLOAT32, 4, 4), v));
