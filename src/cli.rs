@@ -4,7 +4,6 @@
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -195,7 +194,8 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
     })?;
     if let Some(path) = &args.json_summary {
         let json = serde_json::to_string_pretty(&summary)?;
-        std::fs::write(path, json).with_context(|| format!("{}: cannot write the JSON summary", path.display()))?;
+        std::fs::write(path, json)
+            .map_err(|e| anyhow::anyhow!("{}: cannot write the JSON summary: {e}", path.display()))?;
     }
     if !args.quiet {
         eprint!("{}", summary_text(&summary));

@@ -12,7 +12,8 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(failure) => {
-            eprintln!("error: {:#}", failure.error);
+            // Library errors carry their causes in their own messages.
+            eprintln!("error: {}", failure.error);
             ExitCode::from(failure.code as u8)
         }
     }

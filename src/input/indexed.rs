@@ -1,6 +1,7 @@
 //! Indexed reading: summary section, then messages in log-time order through
 //! `sans_io::IndexedReader`, one chunk read from disk per request.
 
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
@@ -333,4 +334,45 @@ pub(super) fn decompress(compression: &str, data: &[u8], expected_size: usize) -
         other => return Err(format!("unsupported compression `{other}`")),
     }
     Ok(out)
+}
+
+/// Exact first and last log time of every channel, from the message index
+/// records that follow each chunk (one small read per chunk). Files without
+/// message indexes give an empty map; inspection then falls back to the file's span.
+pub(super) fn channel_time_spans(
+    path: &Path,
+    summary: &mcap::Summary,
+    options: &InputOptions,
+) -> BTreeMap<u16, (u64, u64)> {
+    let mut spans: BTreeMap<u16, (u64, u64)> = BTreeMap::new();
+    let Ok(mut file) = File::open(path) else {
+        return spans;
+    };
+    let file_size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let mut buffer = Vec::new();
+    for chunk in &summary.chunk_indexes {
+        let Some(&start) = chunk.message_index_offsets.values().min() else {
+            continue;
+        };
+        if read_span(path, &mut file, start, chunk.message_index_length, file_size, options, &mut buffer).is_err() {
+            return BTreeMap::new();
+        }
+        let mut rest = buffer.as_slice();
+        while rest.len() >= 9 {
+            let opcode = rest[0];
+            let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
+            let Some(body) = usize::try_from(len).ok().and_then(|len| rest.get(9..9 + len)) else {
+                break;
+            };
+            if let Ok(Record::MessageIndex(index)) = mcap::parse_record(opcode, body) {
+                for entry in &index.records {
+                    let span = spans.entry(index.channel_id).or_insert((entry.log_time, entry.log_time));
+                    span.0 = span.0.min(entry.log_time);
+                    span.1 = span.1.max(entry.log_time);
+                }
+            }
+            rest = &rest[9 + body.len()..];
+        }
+    }
+    spans
 }

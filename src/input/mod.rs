@@ -180,7 +180,14 @@ impl InputFile {
             Err(reason) => (ReadMode::Linear { reason }, None),
         };
         let catalog = match &summary {
-            Some(summary) => Catalog::from_summary(summary),
+            Some(summary) => {
+                let mut catalog = Catalog::from_summary(summary);
+                for (channel_id, (first, last)) in indexed::channel_time_spans(path, summary, &options) {
+                    catalog.first_log_time_ns.insert(channel_id, first);
+                    catalog.last_log_time_ns.insert(channel_id, last);
+                }
+                catalog
+            }
             None => linear::list_catalog(path, &options)?,
         };
         Ok(Self {

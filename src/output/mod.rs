@@ -127,6 +127,7 @@ impl OutputWriter {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "output".into());
+        std::fs::create_dir_all(&dir).map_err(create_err)?;
         let temp_file = tempfile::Builder::new()
             .prefix(&format!(".{file_name}."))
             .suffix(".tmp")

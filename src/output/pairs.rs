@@ -6,6 +6,7 @@ use serde::Serialize;
 use super::OwnChannelSpec;
 use crate::messages::Scan;
 use crate::pairing::ScanPair;
+use crate::pairing::frames::ExtrinsicInfo;
 
 pub const PAIRS_TOPIC: &str = "/looming/pairs";
 const PAIRS_SCHEMA: &str = include_str!("../../schemas/looming.ScanPair.schema.json");
@@ -75,7 +76,7 @@ impl PairRecord {
         if velocity.is_none() {
             unavailable.push("velocity".to_string());
         }
-        if !pair.motion.has_imu() {
+        if pair.motion.imu_unavailable {
             unavailable.push("imu".to_string());
         }
         if angular.is_none() {
@@ -91,9 +92,13 @@ impl PairRecord {
             speed_mps: velocity.map(|v| v.norm()),
             unavailable,
             extrinsic: ExtrinsicRecord {
-                velocity: pair.motion.velocity_extrinsic_source(),
-                imu: pair.motion.imu_extrinsic_source(),
+                velocity: extrinsic_source(pair.motion.velocity_extrinsic.as_ref()),
+                imu: extrinsic_source(pair.motion.imu_extrinsic.as_ref()),
             },
         }
     }
+}
+
+fn extrinsic_source(info: Option<&ExtrinsicInfo>) -> Option<String> {
+    info.map(|info| info.source.as_str().to_string())
 }
