@@ -288,9 +288,91 @@ impl TimeToOffset {
     }
 }
 
-/// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
+/// Picks the monomorphised loop: the common all-FLOAT32 little-endian x/y/z
+/// layout gets direct f32 loads instead of per-field type dispatch.
 fn extract(
     layout: &Layout<'_>,
+    readers: &Readers,
+    stamp_ns: StampNs,
+    frame_id: String,
+    sensor_pose: Isometry3<f64>,
+) -> Scan {
+    let f32_le = |f: &FieldReader| f.scalar == Scalar::F32 && !f.big_endian;
+    match readers.z {
+        Some(z) if f32_le(&readers.x) && f32_le(&readers.y) && f32_le(&z) => {
+            let xyz = XyzF32Le {
+                x: readers.x.offset,
+                y: readers.y.offset,
+                z: z.offset,
+            };
+            extract_with(layout, xyz, readers, stamp_ns, frame_id, sensor_pose)
+        }
+        _ => {
+            let xyz = XyzAny {
+                x: readers.x,
+                y: readers.y,
+                z: readers.z,
+            };
+            extract_with(layout, xyz, readers, stamp_ns, frame_id, sensor_pose)
+        }
+    }
+}
+
+/// Reads the coordinates of one point.
+trait XyzRead: Copy {
+    fn xyz(&self, point: &[u8]) -> [f32; 3];
+}
+
+/// x, y, z FLOAT32 little-endian at the given offsets.
+#[derive(Clone, Copy)]
+struct XyzF32Le {
+    x: usize,
+    y: usize,
+    z: usize,
+}
+
+#[inline(always)]
+fn f32_le_at(p: &[u8], o: usize) -> f32 {
+    match p.get(o..o + 4).and_then(|s| <[u8; 4]>::try_from(s).ok()) {
+        Some(b) => f32::from_le_bytes(b),
+        None => f32::NAN,
+    }
+}
+
+impl XyzRead for XyzF32Le {
+    #[inline(always)]
+    fn xyz(&self, p: &[u8]) -> [f32; 3] {
+        [
+            f32_le_at(p, self.x),
+            f32_le_at(p, self.y),
+            f32_le_at(p, self.z),
+        ]
+    }
+}
+
+/// Any numeric types and byte order; a missing z reads as 0.
+#[derive(Clone, Copy)]
+struct XyzAny {
+    x: FieldReader,
+    y: FieldReader,
+    z: Option<FieldReader>,
+}
+
+impl XyzRead for XyzAny {
+    #[inline(always)]
+    fn xyz(&self, p: &[u8]) -> [f32; 3] {
+        [
+            self.x.read(p) as f32,
+            self.y.read(p) as f32,
+            self.z.map_or(0.0, |f| f.read(p)) as f32,
+        ]
+    }
+}
+
+/// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
+fn extract_with<X: XyzRead>(
+    layout: &Layout<'_>,
+    xyz: X,
     readers: &Readers,
     stamp_ns: StampNs,
     frame_id: String,
@@ -315,9 +397,7 @@ fn extract(
             break;
         };
         for (c, p) in row.chunks_exact(layout.point_step).enumerate() {
-            let x = readers.x.read(p) as f32;
-            let y = readers.y.read(p) as f32;
-            let z = readers.z.map_or(0.0, |f| f.read(p)) as f32;
+            let [x, y, z] = xyz.xyz(p);
             let finite = x.is_finite() && y.is_finite() && z.is_finite();
             if !finite || (x == 0.0 && y == 0.0 && z == 0.0) {
                 skipped += 1;
