@@ -730,6 +730,15 @@ fn signed_and_negative_values() {
 }
 
 #[test]
+fn two_dimensional_cloud_without_z() {
+    let fields = [("x", datatype::FLOAT32), ("y", datatype::FLOAT32)];
+    let cloud = custom_cloud(0, &fields, &[vec![1.0, 2.0], vec![0.0, 0.0]], 1, 0, false);
+    let scan = scan_of(&cloud);
+    assert_eq!(scan.points_m, vec![[1.0, 2.0, 0.0]]);
+    assert_eq!(scan.skipped_invalid_points, 1);
+}
+
+#[test]
 fn padded_rows_and_source_index() {
     let fields = [
         ("x", datatype::FLOAT32),
@@ -977,6 +986,22 @@ fn foxglove_point_cloud_with_pose() {
     no_pose.pose = None;
     let scan = looming::decode::scan_from_foxglove(&no_pose, &DecodeLimits::default()).unwrap();
     assert_eq!(scan.sensor_pose, nalgebra::Isometry3::identity());
+
+    // A non-finite orientation is refused.
+    let mut bad = cloud.clone();
+    if let Some(pose) = bad.pose.as_mut() {
+        pose.orientation = Some(FgQ {
+            x: f64::NAN,
+            y: 0.0,
+            z: 0.0,
+            w: 1.0,
+        });
+    }
+    let err = looming::decode::scan_from_foxglove(&bad, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(err, DecodeError::InvalidQuaternion { .. }),
+        "{err}"
+    );
 }
 
 #[test]

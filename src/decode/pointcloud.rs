@@ -535,7 +535,8 @@ pub fn scan_from_pointcloud2(
     ))
 }
 
-/// The cloud origin's pose; a missing pose or orientation means identity.
+/// The cloud origin's pose; a missing pose, position or orientation (or an
+/// all-zero orientation) means identity; a non-finite orientation is an error.
 fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f64>, DecodeError> {
     let Some(pose) = pose else {
         return Ok(Isometry3::identity());
@@ -547,7 +548,11 @@ fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f6
             Translation3::new(p.x, p.y, p.z)
         });
     let rotation = match &pose.orientation {
+        // proto3 cannot tell an unset orientation from an all-zero one.
         None => UnitQuaternion::identity(),
+        Some(q) if q.x == 0.0 && q.y == 0.0 && q.z == 0.0 && q.w == 0.0 => {
+            UnitQuaternion::identity()
+        }
         Some(q) => crate::ros::msgs::Quaternion {
             x: q.x,
             y: q.y,
@@ -568,7 +573,8 @@ fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f6
 
 /// Converts a `foxglove.PointCloud` into a [`Scan`], keeping its `pose` as the
 /// sensor pose (points stay in the cloud's origin frame). A trailing partial
-/// point in `data` is ignored, as Foxglove's own viewer does.
+/// point in `data` is ignored, as Foxglove's own viewer does. A missing
+/// `timestamp` gives `stamp_ns` 0.
 pub fn scan_from_foxglove(
     cloud: &foxglove::messages::PointCloud,
     limits: &DecodeLimits,
