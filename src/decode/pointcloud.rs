@@ -288,9 +288,91 @@ impl TimeToOffset {
     }
 }
 
-/// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
+/// Picks the monomorphised loop: the common all-FLOAT32 little-endian x/y/z
+/// layout gets direct f32 loads instead of per-field type dispatch.
 fn extract(
     layout: &Layout<'_>,
+    readers: &Readers,
+    stamp_ns: StampNs,
+    frame_id: String,
+    sensor_pose: Isometry3<f64>,
+) -> Scan {
+    let f32_le = |f: &FieldReader| f.scalar == Scalar::F32 && !f.big_endian;
+    match readers.z {
+        Some(z) if f32_le(&readers.x) && f32_le(&readers.y) && f32_le(&z) => {
+            let xyz = XyzF32Le {
+                x: readers.x.offset,
+                y: readers.y.offset,
+                z: z.offset,
+            };
+            extract_with(layout, xyz, readers, stamp_ns, frame_id, sensor_pose)
+        }
+        _ => {
+            let xyz = XyzAny {
+                x: readers.x,
+                y: readers.y,
+                z: readers.z,
+            };
+            extract_with(layout, xyz, readers, stamp_ns, frame_id, sensor_pose)
+        }
+    }
+}
+
+/// Reads the coordinates of one point.
+trait XyzRead: Copy {
+    fn xyz(&self, point: &[u8]) -> [f32; 3];
+}
+
+/// x, y, z FLOAT32 little-endian at the given offsets.
+#[derive(Clone, Copy)]
+struct XyzF32Le {
+    x: usize,
+    y: usize,
+    z: usize,
+}
+
+#[inline(always)]
+fn f32_le_at(p: &[u8], o: usize) -> f32 {
+    match p.get(o..o + 4).and_then(|s| <[u8; 4]>::try_from(s).ok()) {
+        Some(b) => f32::from_le_bytes(b),
+        None => f32::NAN,
+    }
+}
+
+impl XyzRead for XyzF32Le {
+    #[inline(always)]
+    fn xyz(&self, p: &[u8]) -> [f32; 3] {
+        [
+            f32_le_at(p, self.x),
+            f32_le_at(p, self.y),
+            f32_le_at(p, self.z),
+        ]
+    }
+}
+
+/// Any numeric types and byte order; a missing z reads as 0.
+#[derive(Clone, Copy)]
+struct XyzAny {
+    x: FieldReader,
+    y: FieldReader,
+    z: Option<FieldReader>,
+}
+
+impl XyzRead for XyzAny {
+    #[inline(always)]
+    fn xyz(&self, p: &[u8]) -> [f32; 3] {
+        [
+            self.x.read(p) as f32,
+            self.y.read(p) as f32,
+            self.z.map_or(0.0, |f| f.read(p)) as f32,
+        ]
+    }
+}
+
+/// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
+fn extract_with<X: XyzRead>(
+    layout: &Layout<'_>,
+    xyz: X,
     readers: &Readers,
     stamp_ns: StampNs,
     frame_id: String,
@@ -315,9 +397,7 @@ fn extract(
             break;
         };
         for (c, p) in row.chunks_exact(layout.point_step).enumerate() {
-            let x = readers.x.read(p) as f32;
-            let y = readers.y.read(p) as f32;
-            let z = readers.z.map_or(0.0, |f| f.read(p)) as f32;
+            let [x, y, z] = xyz.xyz(p);
             let finite = x.is_finite() && y.is_finite() && z.is_finite();
             if !finite || (x == 0.0 && y == 0.0 && z == 0.0) {
                 skipped += 1;
@@ -455,7 +535,8 @@ pub fn scan_from_pointcloud2(
     ))
 }
 
-/// The cloud origin's pose; a missing pose or orientation means identity.
+/// The cloud origin's pose; a missing pose, position or orientation (or an
+/// all-zero orientation) means identity; a non-finite orientation is an error.
 fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f64>, DecodeError> {
     let Some(pose) = pose else {
         return Ok(Isometry3::identity());
@@ -467,7 +548,11 @@ fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f6
             Translation3::new(p.x, p.y, p.z)
         });
     let rotation = match &pose.orientation {
+        // proto3 cannot tell an unset orientation from an all-zero one.
         None => UnitQuaternion::identity(),
+        Some(q) if q.x == 0.0 && q.y == 0.0 && q.z == 0.0 && q.w == 0.0 => {
+            UnitQuaternion::identity()
+        }
         Some(q) => crate::ros::msgs::Quaternion {
             x: q.x,
             y: q.y,
@@ -488,7 +573,8 @@ fn foxglove_pose(pose: Option<&foxglove::messages::Pose>) -> Result<Isometry3<f6
 
 /// Converts a `foxglove.PointCloud` into a [`Scan`], keeping its `pose` as the
 /// sensor pose (points stay in the cloud's origin frame). A trailing partial
-/// point in `data` is ignored, as Foxglove's own viewer does.
+/// point in `data` is ignored, as Foxglove's own viewer does. A missing
+/// `timestamp` gives `stamp_ns` 0.
 pub fn scan_from_foxglove(
     cloud: &foxglove::messages::PointCloud,
     limits: &DecodeLimits,

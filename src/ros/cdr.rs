@@ -504,6 +504,29 @@ mod tests {
     }
 
     #[test]
+    fn zero_length_cdr_string_reads_as_empty() {
+        let bytes = [0, 1, 0, 0, 0, 0, 0, 0];
+        assert_eq!(CdrReader::new(&bytes).unwrap().read_str().unwrap(), "");
+    }
+
+    #[test]
+    fn big_endian_primitives() {
+        let mut w = CdrWriter::new(true);
+        w.write_i32(-2);
+        w.write_f64(1.0);
+        let bytes = w.into_bytes();
+        assert_eq!(
+            bytes,
+            [
+                0, 0, 0, 0, 0xff, 0xff, 0xff, 0xfe, 0, 0, 0, 0, 0x3f, 0xf0, 0, 0, 0, 0, 0, 0
+            ]
+        );
+        let mut r = CdrReader::new(&bytes).unwrap();
+        assert_eq!(r.read_i32().unwrap(), -2);
+        assert_eq!(r.read_f64().unwrap(), 1.0);
+    }
+
+    #[test]
     fn huge_sequence_count_is_refused_before_allocation() {
         let bytes = [0xFF, 0xFF, 0xFF, 0xFF, 1, 2, 3];
         let err = Ros1Reader::new(&bytes).read_seq_len(1).unwrap_err();

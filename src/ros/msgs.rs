@@ -380,6 +380,10 @@ impl PointCloud2<'_> {
 /// `ring` UINT16 and `time` FLOAT32 (seconds relative to the stamp), each
 /// present only when given, at natural offsets. Optional slices must have the
 /// same length as `points` (extra entries are ignored, missing ones are 0).
+/// `is_dense` is set when every point is finite and non-zero.
+///
+/// # Panics
+/// If `points` has more than `u32::MAX` entries (not representable in ROS).
 pub fn pointcloud2_from_points(
     stamp_ns: i64,
     frame_id: &str,
