@@ -142,10 +142,14 @@ fn inspect(args: InspectArgs) -> Result<(), Failure> {
 fn process(args: ProcessArgs) -> Result<(), Failure> {
     let usage = |error: anyhow::Error| Failure { error, code: 2 };
     if !(args.reorder_window.is_finite() && args.reorder_window >= 0.0) {
-        return Err(usage(anyhow::anyhow!("--reorder-window must be a non-negative number of seconds")));
+        return Err(usage(anyhow::anyhow!(
+            "--reorder-window must be a non-negative number of seconds"
+        )));
     }
     if args.max_gap.is_some_and(|g| !(g.is_finite() && g > 0.0)) {
-        return Err(usage(anyhow::anyhow!("--max-gap must be a positive number of seconds")));
+        return Err(usage(anyhow::anyhow!(
+            "--max-gap must be a positive number of seconds"
+        )));
     }
     let config = ProcessConfig {
         input: args.input.clone(),
@@ -182,7 +186,8 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
         let code = match &error {
             ProcessError::Topic { .. } | ProcessError::Config(_) => 2,
             ProcessError::Output(
-                looming::output::OutputError::Exists { .. } | looming::output::OutputError::SameAsInput { .. },
+                looming::output::OutputError::Exists { .. }
+                | looming::output::OutputError::SameAsInput { .. },
             ) => 2,
             ProcessError::Strict(_) => 3,
             _ => 1,
@@ -194,8 +199,9 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
     })?;
     if let Some(path) = &args.json_summary {
         let json = serde_json::to_string_pretty(&summary)?;
-        std::fs::write(path, json)
-            .map_err(|e| anyhow::anyhow!("{}: cannot write the JSON summary: {e}", path.display()))?;
+        std::fs::write(path, json).map_err(|e| {
+            anyhow::anyhow!("{}: cannot write the JSON summary: {e}", path.display())
+        })?;
     }
     if !args.quiet {
         eprint!("{}", summary_text(&summary));
@@ -242,14 +248,20 @@ fn summary_text(s: &RunSummary) -> String {
         ReadMode::Linear { reason } => format!("linear, file order with reorder window ({reason})"),
     };
     let mb = |b: u64| b as f64 / 1e6;
-    let _ = writeln!(out, "looming {}: {} -> {}", s.tool_version, s.input, s.output);
+    let _ = writeln!(
+        out,
+        "looming {}: {} -> {}",
+        s.tool_version, s.input, s.output
+    );
     let _ = writeln!(out, "  read          {mode}");
     let _ = writeln!(
         out,
         "  copied        {} messages, {} metadata, {} attachments",
         s.messages_copied, s.metadata_copied, s.attachments_copied
     );
-    let topic = |c: &Option<looming::topics::SelectedChannel>| c.as_ref().map_or("none".to_string(), |c| c.topic.clone());
+    let topic = |c: &Option<looming::topics::SelectedChannel>| {
+        c.as_ref().map_or("none".to_string(), |c| c.topic.clone())
+    };
     let _ = writeln!(
         out,
         "  topics        lidar {}, imu {}, velocity {}, tf {}",
@@ -261,13 +273,22 @@ fn summary_text(s: &RunSummary) -> String {
     let _ = writeln!(
         out,
         "  decoded       {} scans ({} points, {} invalid skipped), {} imu, {} velocity, {} tf",
-        s.decoded.scans, s.decoded.lidar_points, s.decoded.invalid_points_skipped, s.decoded.imu, s.decoded.velocity, s.decoded.tf_messages
+        s.decoded.scans,
+        s.decoded.lidar_points,
+        s.decoded.invalid_points_skipped,
+        s.decoded.imu,
+        s.decoded.velocity,
+        s.decoded.tf_messages
     );
     let p = &s.pairing;
     let _ = writeln!(
         out,
         "  pairs         {} written; skipped: {} dt<=0, {} gaps; {} without velocity, {} without imu",
-        s.pairs_written, p.skipped_nonpositive_dt, p.skipped_gap, p.pairs_without_velocity, p.pairs_without_imu
+        s.pairs_written,
+        p.skipped_nonpositive_dt,
+        p.skipped_gap,
+        p.pairs_without_velocity,
+        p.pairs_without_imu
     );
     let _ = writeln!(out, "  bad messages  {}", s.bad_messages);
     for bad in s.bad_message_examples.iter().take(5) {

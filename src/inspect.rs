@@ -60,7 +60,11 @@ pub fn inspect(path: &Path) -> Result<InspectReport, InputError> {
     let roles = candidates(catalog);
     let role_of = |id: u16| roles.iter().find(|c| c.channel_id == id).map(|c| c.role);
     let topics_with = |role: Role| -> Vec<String> {
-        roles.iter().filter(|c| c.role == role).map(|c| c.topic.clone()).collect()
+        roles
+            .iter()
+            .filter(|c| c.role == role)
+            .map(|c| c.topic.clone())
+            .collect()
     };
     let file_span_s = match (catalog.start_ns, catalog.end_ns) {
         (Some(start), Some(end)) if end > start => Some((end - start) as f64 * 1e-9),
@@ -85,7 +89,9 @@ pub fn inspect(path: &Path) -> Result<InspectReport, InputError> {
             }
         })
         .collect();
-    let problem = select(catalog, &TopicOverrides::default()).err().map(|e| e.to_string());
+    let problem = select(catalog, &TopicOverrides::default())
+        .err()
+        .map(|e| e.to_string());
     Ok(InspectReport {
         file: path.display().to_string(),
         file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),

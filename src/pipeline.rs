@@ -85,7 +85,11 @@ impl std::fmt::Display for BadMessage {
 
 /// Log time as seconds.nanoseconds, as `mcap cat` prints it.
 pub fn format_log_time(log_time_ns: u64) -> String {
-    format!("{}.{:09} s", log_time_ns / 1_000_000_000, log_time_ns % 1_000_000_000)
+    format!(
+        "{}.{:09} s",
+        log_time_ns / 1_000_000_000,
+        log_time_ns % 1_000_000_000
+    )
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -155,22 +159,27 @@ pub struct DecodedCounts {
 const BAD_MESSAGE_EXAMPLES: usize = 20;
 
 /// Run `looming process`.
-pub fn process(config: &ProcessConfig, progress: &dyn ProgressSink) -> Result<RunSummary, ProcessError> {
+pub fn process(
+    config: &ProcessConfig,
+    progress: &dyn ProgressSink,
+) -> Result<RunSummary, ProcessError> {
     let started = Instant::now();
     check_output_path(&config.input, &config.output, config.output_options.force)?;
     let cli_extrinsic = match &config.pairing.extrinsic {
         Some(text) => Some(
-            crate::pairing::parse_extrinsic(text).map_err(|e| ProcessError::Config(format!("--extrinsic: {e}")))?,
+            crate::pairing::parse_extrinsic(text)
+                .map_err(|e| ProcessError::Config(format!("--extrinsic: {e}")))?,
         ),
         None => None,
     };
     let mut input = InputFile::open(&config.input, config.input_options.clone())?;
     let mut restarted_because = None;
     loop {
-        let topics = select(input.catalog(), &config.topics).map_err(|source| ProcessError::Topic {
-            path: config.input.clone(),
-            source,
-        })?;
+        let topics =
+            select(input.catalog(), &config.topics).map_err(|source| ProcessError::Topic {
+                path: config.input.clone(),
+                source,
+            })?;
         let outcome = run_once(config, &input, &topics, cli_extrinsic, progress)?;
         // IndexedReader silently skips messages outside chunks: if the count
         // disagrees with the statistics, read the file linearly instead.
@@ -280,21 +289,28 @@ fn read_and_decode(
     topics: &TopicSelection,
     tx: SyncSender<FromReader>,
 ) -> Result<ReadReport, ProcessError> {
-    let by_channel: HashMap<u16, &SelectedChannel> = topics.all().map(|c| (c.channel_id, c)).collect();
+    let by_channel: HashMap<u16, &SelectedChannel> =
+        topics.all().map(|c| (c.channel_id, c)).collect();
     let file_name = input.path().display().to_string();
     let mut strict_failure: Option<BadMessage> = None;
     let mut sink = |record: InputRecord| -> Flow {
         let decoded = match &record {
             InputRecord::Message(message) => by_channel.get(&message.channel_id).map(|channel| {
                 let is_static = channel.role == Role::TfStatic;
-                decode::decode(channel.kind, channel.encoding, is_static, &message.data, &config.decode_limits)
-                    .map(|decoded| (message.log_time_ns, decoded))
-                    .map_err(|err| BadMessage {
-                        file: file_name.clone(),
-                        topic: channel.topic.clone(),
-                        log_time_ns: message.log_time_ns,
-                        reason: err.to_string(),
-                    })
+                decode::decode(
+                    channel.kind,
+                    channel.encoding,
+                    is_static,
+                    &message.data,
+                    &config.decode_limits,
+                )
+                .map(|decoded| (message.log_time_ns, decoded))
+                .map_err(|err| BadMessage {
+                    file: file_name.clone(),
+                    topic: channel.topic.clone(),
+                    log_time_ns: message.log_time_ns,
+                    reason: err.to_string(),
+                })
             }),
             _ => None,
         };
@@ -303,7 +319,10 @@ fn read_and_decode(
         }
         let item = match decoded {
             None => return Flow::Continue(()),
-            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded { log_time_ns, decoded },
+            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded {
+                log_time_ns,
+                decoded,
+            },
             Some(Err(bad)) if config.strict => {
                 strict_failure = Some(bad);
                 return Flow::Break(());
@@ -367,7 +386,10 @@ fn pair_scans(
                 }
                 continue;
             }
-            FromReader::Decoded { log_time_ns, decoded } => feed(&mut pairer, &mut outcome.decoded, log_time_ns, decoded),
+            FromReader::Decoded {
+                log_time_ns,
+                decoded,
+            } => feed(&mut pairer, &mut outcome.decoded, log_time_ns, decoded),
         };
         if !emit(events, pairs_channel, &mut outcome, &tx) {
             break;
@@ -379,7 +401,12 @@ fn pair_scans(
     outcome
 }
 
-fn feed(pairer: &mut ScanPairer, counts: &mut DecodedCounts, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
+fn feed(
+    pairer: &mut ScanPairer,
+    counts: &mut DecodedCounts,
+    log_time_ns: u64,
+    decoded: Decoded,
+) -> Vec<PairEvent> {
     match decoded {
         Decoded::Scan(scan) => {
             counts.scans += 1;
@@ -395,7 +422,10 @@ fn feed(pairer: &mut ScanPairer, counts: &mut DecodedCounts, log_time_ns: u64, d
             counts.velocity += 1;
             pairer.push_velocity(log_time_ns, sample)
         }
-        Decoded::Transforms { transforms, is_static } => {
+        Decoded::Transforms {
+            transforms,
+            is_static,
+        } => {
             counts.tf_messages += 1;
             pairer.push_transforms(&transforms, is_static);
             Vec::new()
@@ -404,7 +434,12 @@ fn feed(pairer: &mut ScanPairer, counts: &mut DecodedCounts, log_time_ns: u64, d
 }
 
 /// Send the pairer's events on; false when the writer has gone.
-fn emit(events: Vec<PairEvent>, pairs_channel: u16, outcome: &mut PairingOutcome, tx: &SyncSender<ToWriter>) -> bool {
+fn emit(
+    events: Vec<PairEvent>,
+    pairs_channel: u16,
+    outcome: &mut PairingOutcome,
+    tx: &SyncSender<ToWriter>,
+) -> bool {
     for event in events {
         match event {
             PairEvent::Pair(pair) => {
@@ -489,7 +524,9 @@ fn finish_run(
         warnings.push(format!("read linearly in file order ({reason})"));
     }
     if let Some(reason) = restarted_because {
-        warnings.push(format!("restarted the indexed read as a linear read: {reason}"));
+        warnings.push(format!(
+            "restarted the indexed read as a linear read: {reason}"
+        ));
     }
     warnings.extend(report.warnings.iter().map(|w| w.message.clone()));
     warnings.extend(pairing.warnings.iter().cloned());

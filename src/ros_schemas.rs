@@ -3,7 +3,8 @@
 //! synthetic and fixture logs, so that Foxglove and other readers can decode
 //! them.
 
-const SEP: &str = "================================================================================\n";
+const SEP: &str =
+    "================================================================================\n";
 
 const HEADER_ROS2: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
 const HEADER_ROS1: &str = "uint32 seq\ntime stamp\nstring frame_id\n";
@@ -57,13 +58,20 @@ fn dep(dialect: RosDialect, package: &str, type_name: &str, text: &str) -> Strin
 fn header_deps(dialect: RosDialect) -> String {
     match dialect {
         RosDialect::Ros1 => dep(dialect, "std_msgs", "Header", HEADER_ROS1),
-        RosDialect::Ros2 => dep(dialect, "std_msgs", "Header", HEADER_ROS2) + &dep(dialect, "builtin_interfaces", "Time", TIME_ROS2),
+        RosDialect::Ros2 => {
+            dep(dialect, "std_msgs", "Header", HEADER_ROS2)
+                + &dep(dialect, "builtin_interfaces", "Time", TIME_ROS2)
+        }
     }
 }
 
 pub fn point_cloud2(dialect: RosDialect) -> String {
     let main = "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool    is_bigendian\nuint32  point_step\nuint32  row_step\nuint8[] data\nbool is_dense\n";
-    format!("{main}{}{}", header_deps(dialect), dep(dialect, "sensor_msgs", "PointField", POINT_FIELD))
+    format!(
+        "{main}{}{}",
+        header_deps(dialect),
+        dep(dialect, "sensor_msgs", "PointField", POINT_FIELD)
+    )
 }
 
 pub fn imu(dialect: RosDialect) -> String {
@@ -81,7 +89,12 @@ pub fn twist_stamped(dialect: RosDialect) -> String {
     format!(
         "{main}{}{}{}",
         header_deps(dialect),
-        dep(dialect, "geometry_msgs", "Twist", "Vector3  linear\nVector3  angular\n"),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "Twist",
+            "Vector3  linear\nVector3  angular\n"
+        ),
         dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
     )
 }
@@ -91,12 +104,32 @@ pub fn odometry(dialect: RosDialect) -> String {
     format!(
         "{main}{}{}{}{}{}{}{}",
         header_deps(dialect),
-        dep(dialect, "geometry_msgs", "PoseWithCovariance", "Pose pose\nfloat64[36] covariance\n"),
-        dep(dialect, "geometry_msgs", "Pose", "Point position\nQuaternion orientation\n"),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "PoseWithCovariance",
+            "Pose pose\nfloat64[36] covariance\n"
+        ),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "Pose",
+            "Point position\nQuaternion orientation\n"
+        ),
         dep(dialect, "geometry_msgs", "Point", POINT),
         dep(dialect, "geometry_msgs", "Quaternion", QUATERNION),
-        dep(dialect, "geometry_msgs", "TwistWithCovariance", "Twist twist\nfloat64[36] covariance\n"),
-        dep(dialect, "geometry_msgs", "Twist", "Vector3  linear\nVector3  angular\n") + &dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
+        dep(
+            dialect,
+            "geometry_msgs",
+            "TwistWithCovariance",
+            "Twist twist\nfloat64[36] covariance\n"
+        ),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "Twist",
+            "Vector3  linear\nVector3  angular\n"
+        ) + &dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
     )
 }
 
@@ -104,9 +137,19 @@ pub fn tf_message(dialect: RosDialect) -> String {
     let main = "geometry_msgs/TransformStamped[] transforms\n";
     format!(
         "{main}{}{}{}{}{}",
-        dep(dialect, "geometry_msgs", "TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "TransformStamped",
+            "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"
+        ),
         header_deps(dialect),
-        dep(dialect, "geometry_msgs", "Transform", "Vector3 translation\nQuaternion rotation\n"),
+        dep(
+            dialect,
+            "geometry_msgs",
+            "Transform",
+            "Vector3 translation\nQuaternion rotation\n"
+        ),
         dep(dialect, "geometry_msgs", "Vector3", VECTOR3),
         dep(dialect, "geometry_msgs", "Quaternion", QUATERNION)
     )

@@ -164,7 +164,8 @@ fn choose(
 ) -> Result<Option<SelectedChannel>, TopicError> {
     let of_role: Vec<&SelectedChannel> = all.iter().filter(|c| c.role == role).collect();
     if let Some(topic) = wanted {
-        let matching: Vec<&&SelectedChannel> = of_role.iter().filter(|c| c.topic == topic).collect();
+        let matching: Vec<&&SelectedChannel> =
+            of_role.iter().filter(|c| c.topic == topic).collect();
         return match matching.as_slice() {
             [one] => Ok(Some((**one).clone())),
             [] => Err(TopicError::Unknown(format!(

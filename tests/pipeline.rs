@@ -45,7 +45,11 @@ fn layouts() -> [(&'static str, Layout); 5] {
 }
 
 /// Run `process` and return the JSON summary and the output contents.
-fn process(dir: &std::path::Path, input: &[u8], extra: &[&str]) -> (serde_json::Value, FileContents, Vec<u8>) {
+fn process(
+    dir: &std::path::Path,
+    input: &[u8],
+    extra: &[&str],
+) -> (serde_json::Value, FileContents, Vec<u8>) {
     let in_path = dir.join("in.mcap");
     let out_path = dir.join("out.mcap");
     let summary_path = dir.join("summary.json");
@@ -62,7 +66,8 @@ fn process(dir: &std::path::Path, input: &[u8], extra: &[&str]) -> (serde_json::
     args.extend_from_slice(extra);
     let run = looming(&args);
     assert!(run.status.success(), "process failed: {}", stderr(&run));
-    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(&summary_path).unwrap()).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&summary_path).unwrap()).unwrap();
     let bytes = std::fs::read(&out_path).unwrap();
     (summary, read_all(&bytes), bytes)
 }
@@ -71,7 +76,9 @@ fn pair_records(contents: &FileContents) -> Vec<PairRecord> {
     contents
         .topic_messages("/looming/pairs")
         .iter()
-        .map(|m| serde_json::from_slice(&m.data).expect("pair messages are valid JSON of the schema"))
+        .map(|m| {
+            serde_json::from_slice(&m.data).expect("pair messages are valid JSON of the schema")
+        })
         .collect()
 }
 
@@ -84,10 +91,17 @@ fn assert_pairs_are_right(pairs: &[PairRecord]) {
         assert_eq!(pair.current.stamp_ns - pair.previous.stamp_ns, 100_000_000);
         assert!((pair.dt_s - 0.1).abs() < 1e-9, "dt {}", pair.dt_s);
         if i > 0 {
-            assert_eq!(pair.previous.stamp_ns, pairs[i - 1].current.stamp_ns, "consecutive scans");
+            assert_eq!(
+                pair.previous.stamp_ns,
+                pairs[i - 1].current.stamp_ns,
+                "consecutive scans"
+            );
         }
         let v = pair.velocity_lidar_mps.expect("velocity available");
-        assert!((v[0] - 10.0).abs() < 1e-9 && v[1].abs() < 1e-9 && v[2].abs() < 1e-9, "velocity {v:?}");
+        assert!(
+            (v[0] - 10.0).abs() < 1e-9 && v[1].abs() < 1e-9 && v[2].abs() < 1e-9,
+            "velocity {v:?}"
+        );
         let w = pair.angular_velocity_lidar_radps.expect("gyro available");
         assert!(w.iter().all(|c| c.abs() < 1e-12));
         assert!(pair.unavailable.is_empty(), "{:?}", pair.unavailable);
@@ -106,18 +120,44 @@ fn every_encoding_and_layout_is_copied_unchanged_and_paired() {
             let (summary, output, _) = process(&dir, &input, &[]);
             let original = read_all(&input);
             assert_all_input_messages_copied(&original, &output);
-            assert_eq!(output.metadata.iter().filter(|m| m.name == "recording").count(), 1, "{name}");
-            assert_eq!(output.attachments, original.attachments, "{name}: attachments");
+            assert_eq!(
+                output
+                    .metadata
+                    .iter()
+                    .filter(|m| m.name == "recording")
+                    .count(),
+                1,
+                "{name}"
+            );
+            assert_eq!(
+                output.attachments, original.attachments,
+                "{name}: attachments"
+            );
             assert_eq!(output.profile, "", "{name}: our channels are not CDR");
-            let looming_meta = output.metadata.iter().find(|m| m.name == "looming").expect("looming metadata");
+            let looming_meta = output
+                .metadata
+                .iter()
+                .find(|m| m.name == "looming")
+                .expect("looming metadata");
             assert_eq!(looming_meta.metadata["version"], env!("CARGO_PKG_VERSION"));
-            let config: serde_json::Value = serde_json::from_str(&looming_meta.metadata["config"]).unwrap();
-            assert_eq!(config["topics"]["lidar"]["topic"], "/sensing/lidar/points", "{name}");
+            let config: serde_json::Value =
+                serde_json::from_str(&looming_meta.metadata["config"]).unwrap();
+            assert_eq!(
+                config["topics"]["lidar"]["topic"], "/sensing/lidar/points",
+                "{name}"
+            );
             assert_pairs_are_right(&pair_records(&output));
-            let expected_mode = if layout_name.starts_with("indexed") { "indexed" } else { "linear" };
+            let expected_mode = if layout_name.starts_with("indexed") {
+                "indexed"
+            } else {
+                "linear"
+            };
             assert_eq!(summary["read"]["mode"], expected_mode, "{name}");
             assert_eq!(summary["bad_messages"], 0, "{name}");
-            assert_eq!(summary["input_report"]["out_of_order_beyond_window"], 0, "{name}");
+            assert_eq!(
+                summary["input_report"]["out_of_order_beyond_window"], 0,
+                "{name}"
+            );
         }
     }
 }
@@ -125,11 +165,21 @@ fn every_encoding_and_layout_is_copied_unchanged_and_paired() {
 #[test]
 fn messages_come_out_in_log_time_order() {
     // The fixture writes each scan after 50 ms of later IMU messages.
-    for (name, layout) in [("indexed", Layout::indexed()), ("linear", Layout::no_summary())] {
+    for (name, layout) in [
+        ("indexed", Layout::indexed()),
+        ("linear", Layout::no_summary()),
+    ] {
         let dir = scratch(&format!("order-{name}"));
         let input = drive_log(&spec(Encoding::Ros2 { big_endian: false }, layout));
-        let in_order: Vec<u64> = read_all(&input).messages.iter().map(|m| m.log_time).collect();
-        assert!(in_order.windows(2).any(|w| w[1] < w[0]), "the fixture is out of order in file order");
+        let in_order: Vec<u64> = read_all(&input)
+            .messages
+            .iter()
+            .map(|m| m.log_time)
+            .collect();
+        assert!(
+            in_order.windows(2).any(|w| w[1] < w[0]),
+            "the fixture is out of order in file order"
+        );
         let (_, output, _) = process(&dir, &input, &[]);
         let input_channels = [1u16, 2, 3, 4, 5];
         let times: Vec<u64> = output
@@ -138,14 +188,20 @@ fn messages_come_out_in_log_time_order() {
             .filter(|m| input_channels.contains(&m.channel_id))
             .map(|m| m.log_time)
             .collect();
-        assert!(times.windows(2).all(|w| w[0] <= w[1]), "{name}: copied in log-time order");
+        assert!(
+            times.windows(2).all(|w| w[0] <= w[1]),
+            "{name}: copied in log-time order"
+        );
     }
 }
 
 #[test]
 fn the_same_input_gives_a_byte_identical_output() {
     let dir = scratch("determinism");
-    let input = drive_log(&spec(Encoding::Ros2 { big_endian: false }, Layout::indexed()));
+    let input = drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ));
     let (_, _, first) = process(&dir, &input, &[]);
     let (_, _, second) = process(&dir, &input, &[]);
     assert!(first == second);
@@ -159,16 +215,19 @@ fn our_ids_do_not_collide_with_input_ids() {
     let pairs_id = output
         .channels
         .iter()
-        .find(|(_, (topic, _, _))| topic == "/looming/pairs")
+        .find(|(_, channel)| channel.topic == "/looming/pairs")
         .map(|(id, _)| *id)
         .unwrap();
     assert!(pairs_id > 5);
-    let (_, encoding, schema) = &output.channels[&pairs_id];
-    assert_eq!(encoding, "json");
-    let (schema_id, name, schema_encoding, data) = schema.clone().unwrap();
-    assert!(schema_id > 5);
-    assert_eq!((name.as_str(), schema_encoding.as_str()), ("looming.ScanPair", "jsonschema"));
-    let _: serde_json::Value = serde_json::from_slice(&data).expect("the schema is JSON");
+    let channel = &output.channels[&pairs_id];
+    assert_eq!(channel.message_encoding, "json");
+    let schema = channel.schema.clone().unwrap();
+    assert!(schema.id > 5);
+    assert_eq!(
+        (schema.name.as_str(), schema.encoding.as_str()),
+        ("looming.ScanPair", "jsonschema")
+    );
+    let _: serde_json::Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
 }
 
 /// Cut the file in the middle of its third chunk.
@@ -195,7 +254,11 @@ fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
     let kept: Vec<RawMessage> = {
         let summary = mcap::Summary::read(&full).unwrap().unwrap();
         let mut messages = Vec::new();
-        for chunk in summary.chunk_indexes.iter().filter(|c| c.chunk_start_offset < first_lost_chunk_offset) {
+        for chunk in summary
+            .chunk_indexes
+            .iter()
+            .filter(|c| c.chunk_start_offset < first_lost_chunk_offset)
+        {
             for message in summary.stream_chunk(&full, chunk).unwrap() {
                 let message = message.unwrap();
                 messages.push(RawMessage {
@@ -212,10 +275,18 @@ fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
     assert!(!kept.is_empty());
     let (summary, output, _) = process(&dir, &cut, &[]);
     let mut expected = kept.clone();
-    let mut actual: Vec<RawMessage> = output.messages.iter().filter(|m| m.channel_id <= 5).cloned().collect();
+    let mut actual: Vec<RawMessage> = output
+        .messages
+        .iter()
+        .filter(|m| m.channel_id <= 5)
+        .cloned()
+        .collect();
     expected.sort();
     actual.sort();
-    assert_eq!(actual, expected, "exactly the complete messages before the cut");
+    assert_eq!(
+        actual, expected,
+        "exactly the complete messages before the cut"
+    );
     assert_eq!(summary["read"]["mode"], "linear");
     let warnings = summary["warnings"].to_string();
     assert!(warnings.contains("truncated"), "{warnings}");
@@ -232,16 +303,24 @@ fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
     assert!(!dir.join("strict.mcap").exists(), "no output on failure");
 }
 
+/// Register the schemas and channels of `contents` in `log`, same ids.
+fn copy_channels(contents: &FileContents, log: &mut looming::fixtures::LogBuilder) {
+    for (id, channel) in &contents.channels {
+        let schema = channel.schema.clone().unwrap();
+        log.schema(schema.id, &schema.name, &schema.encoding, &schema.data);
+        log.channel(*id, schema.id, &channel.topic, &channel.message_encoding);
+    }
+}
+
 /// A drive whose IMU message 5 and scan 3 are replaced by garbage.
 fn log_with_bad_messages() -> Vec<u8> {
-    let good = drive_log(&spec(Encoding::Ros2 { big_endian: false }, Layout::indexed()));
+    let good = drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ));
     let contents = read_all(&good);
     let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
-    for (id, (topic, encoding, schema)) in &contents.channels {
-        let (schema_id, name, schema_encoding, data) = schema.clone().unwrap();
-        log.schema(schema_id, &name, &schema_encoding, &data);
-        log.channel(*id, schema_id, topic, encoding);
-    }
+    copy_channels(&contents, &mut log);
     let (mut imu_seen, mut scans_seen) = (0, 0);
     for m in &contents.messages {
         let mut data = m.data.clone();
@@ -289,25 +368,49 @@ fn bad_messages_are_skipped_counted_and_named() {
     ]);
     assert_eq!(strict.status.code(), Some(3));
     let message = stderr(&strict);
-    assert!(message.contains("/sensing/") && message.contains("log time"), "{message}");
+    assert!(
+        message.contains("/sensing/") && message.contains("log time"),
+        "{message}"
+    );
 }
 
 #[test]
 fn output_paths_are_guarded() {
     let dir = scratch("paths");
-    let input = drive_log(&spec(Encoding::Ros2 { big_endian: false }, Layout::indexed()));
+    let input = drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ));
     let in_path = dir.join("in.mcap");
     write(&in_path, &input);
-    let same = looming(&["process", in_path.to_str().unwrap(), "-o", in_path.to_str().unwrap(), "--force"]);
+    let same = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        in_path.to_str().unwrap(),
+        "--force",
+    ]);
     assert_eq!(same.status.code(), Some(2), "{}", stderr(&same));
     assert_eq!(std::fs::read(&in_path).unwrap(), input, "input untouched");
     let out_path = dir.join("out.mcap");
     write(&out_path, b"precious");
-    let exists = looming(&["process", in_path.to_str().unwrap(), "-o", out_path.to_str().unwrap()]);
+    let exists = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
     assert_eq!(exists.status.code(), Some(2));
     assert!(stderr(&exists).contains("--force"));
     assert_eq!(std::fs::read(&out_path).unwrap(), b"precious");
-    let forced = looming(&["process", in_path.to_str().unwrap(), "-o", out_path.to_str().unwrap(), "--force", "-q"]);
+    let forced = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+        "--force",
+        "-q",
+    ]);
     assert!(forced.status.success());
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -320,18 +423,23 @@ fn output_paths_are_guarded() {
 #[test]
 fn ambiguous_and_unknown_topics_list_the_candidates() {
     let dir = scratch("topics");
-    let good = drive_log(&spec(Encoding::Ros2 { big_endian: false }, Layout::indexed()));
+    let good = drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ));
     let contents = read_all(&good);
     // Add a second LiDAR channel carrying the same scans.
     let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
-    for (id, (topic, encoding, schema)) in &contents.channels {
-        let (schema_id, name, schema_encoding, data) = schema.clone().unwrap();
-        log.schema(schema_id, &name, &schema_encoding, &data);
-        log.channel(*id, schema_id, topic, encoding);
-    }
+    copy_channels(&contents, &mut log);
     log.channel(9, 1, "/sensing/lidar/rear", "cdr");
     for m in &contents.messages {
-        log.message(m.channel_id, m.sequence, m.log_time, m.publish_time, &m.data);
+        log.message(
+            m.channel_id,
+            m.sequence,
+            m.log_time,
+            m.publish_time,
+            &m.data,
+        );
         if m.channel_id == 1 {
             log.message(9, m.sequence, m.log_time, m.publish_time, &m.data);
         }
@@ -339,12 +447,30 @@ fn ambiguous_and_unknown_topics_list_the_candidates() {
     let in_path = dir.join("in.mcap");
     write(&in_path, &log.finish());
     let out = dir.join("out.mcap");
-    let ambiguous = looming(&["process", in_path.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let ambiguous = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(ambiguous.status.code(), Some(2));
     let text = stderr(&ambiguous);
-    assert!(text.contains("/sensing/lidar/points") && text.contains("/sensing/lidar/rear"), "{text}");
-    assert!(text.contains("--lidar-topic") && text.contains("sensor_msgs/msg/PointCloud2"), "{text}");
-    let unknown = looming(&["process", in_path.to_str().unwrap(), "-o", out.to_str().unwrap(), "--lidar-topic", "/nope"]);
+    assert!(
+        text.contains("/sensing/lidar/points") && text.contains("/sensing/lidar/rear"),
+        "{text}"
+    );
+    assert!(
+        text.contains("--lidar-topic") && text.contains("sensor_msgs/msg/PointCloud2"),
+        "{text}"
+    );
+    let unknown = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--lidar-topic",
+        "/nope",
+    ]);
     assert_eq!(unknown.status.code(), Some(2));
     assert!(stderr(&unknown).contains("/sensing/lidar/rear"));
     let chosen = looming(&[
@@ -403,16 +529,27 @@ fn inspect_lists_channels_and_detected_topics() {
     let dir = scratch("inspect");
     for (name, layout) in layouts() {
         let path = dir.join(format!("{name}.mcap"));
-        write(&path, &drive_log(&spec(Encoding::Ros2 { big_endian: false }, layout)));
+        write(
+            &path,
+            &drive_log(&spec(Encoding::Ros2 { big_endian: false }, layout)),
+        );
         let run = looming(&["inspect", path.to_str().unwrap(), "--json"]);
         assert!(run.status.success(), "{}", stderr(&run));
         let report: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
-        assert_eq!(report["detected"]["lidar"][0], "/sensing/lidar/points", "{name}");
+        assert_eq!(
+            report["detected"]["lidar"][0], "/sensing/lidar/points",
+            "{name}"
+        );
         assert_eq!(report["detected"]["imu"][0], "/sensing/imu");
         assert_eq!(report["detected"]["velocity"][0], "/vehicle/twist");
         assert_eq!(report["detected"]["tf_static"][0], "/tf_static");
         assert_eq!(report["detected"]["problem"], serde_json::Value::Null);
-        let lidar = report["channels"].as_array().unwrap().iter().find(|c| c["topic"] == "/sensing/lidar/points").unwrap();
+        let lidar = report["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["topic"] == "/sensing/lidar/points")
+            .unwrap();
         assert_eq!(lidar["message_count"], SCANS);
         let rate = lidar["rate_hz"].as_f64().unwrap();
         assert!((rate - 10.0).abs() < 2.0, "{name}: rate {rate}");
@@ -443,6 +580,13 @@ fn verify_checks_chunk_crcs() {
     assert_eq!(summary["input_report"]["bad_crc_chunks"], 1);
     assert!(summary["warnings"].to_string().contains("CRC"));
     let in_path = dir.join("in.mcap");
-    let strict = looming(&["process", in_path.to_str().unwrap(), "-o", dir.join("s.mcap").to_str().unwrap(), "--verify", "--strict"]);
+    let strict = looming(&[
+        "process",
+        in_path.to_str().unwrap(),
+        "-o",
+        dir.join("s.mcap").to_str().unwrap(),
+        "--verify",
+        "--strict",
+    ]);
     assert_eq!(strict.status.code(), Some(3), "{}", stderr(&strict));
 }

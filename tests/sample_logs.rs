@@ -5,7 +5,9 @@
 use std::path::Path;
 
 fn check(file: &str, bytes: Vec<u8>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs").join(file);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("sample_logs")
+        .join(file);
     if std::env::var_os("LOOMING_REGENERATE_SAMPLES").is_some() {
         std::fs::write(&path, &bytes).unwrap();
     }

@@ -42,7 +42,11 @@ impl Catalog {
     /// Build from a summary section.
     pub fn from_summary(summary: &mcap::Summary) -> Self {
         let mut catalog = Catalog {
-            schemas: summary.schemas.iter().map(|(k, v)| (*k, v.clone())).collect(),
+            schemas: summary
+                .schemas
+                .iter()
+                .map(|(k, v)| (*k, v.clone()))
+                .collect(),
             channels: summary
                 .channels
                 .iter()
@@ -66,9 +70,15 @@ impl Catalog {
     /// Record one message seen during a linear listing.
     pub fn count_message(&mut self, channel_id: u16, log_time_ns: u64) {
         *self.message_counts.entry(channel_id).or_default() += 1;
-        let first = self.first_log_time_ns.entry(channel_id).or_insert(log_time_ns);
+        let first = self
+            .first_log_time_ns
+            .entry(channel_id)
+            .or_insert(log_time_ns);
         *first = (*first).min(log_time_ns);
-        let last = self.last_log_time_ns.entry(channel_id).or_insert(log_time_ns);
+        let last = self
+            .last_log_time_ns
+            .entry(channel_id)
+            .or_insert(log_time_ns);
         *last = (*last).max(log_time_ns);
         self.start_ns = Some(self.start_ns.map_or(log_time_ns, |s| s.min(log_time_ns)));
         self.end_ns = Some(self.end_ns.map_or(log_time_ns, |e| e.max(log_time_ns)));

@@ -47,7 +47,11 @@ pub(super) fn read_summary(
                     .map_err(|e| format!("seeking to the summary failed: {e}"))?;
                 reader.notify_seeked(pos);
             }
-            Err(e) => return Err(format!("the summary could not be read ({e}); the file may be truncated")),
+            Err(e) => {
+                return Err(format!(
+                    "the summary could not be read ({e}); the file may be truncated"
+                ));
+            }
         }
     }
     Ok(reader.finish())
@@ -60,7 +64,9 @@ pub(super) fn read_summary(
 /// again after the read.
 pub(super) fn why_not_indexed(summary: &mcap::Summary) -> Option<String> {
     let Some(stats) = &summary.stats else {
-        return Some("the summary has no statistics record, so index coverage cannot be checked".into());
+        return Some(
+            "the summary has no statistics record, so index coverage cannot be checked".into(),
+        );
     };
     if summary.chunk_indexes.is_empty() && stats.message_count > 0 {
         return Some("the file is unchunked (no chunk indexes)".into());
@@ -92,7 +98,15 @@ pub(super) fn read(
     let mut report = ReadReport::default();
     let mut buffer = Vec::new();
     for record in side_records(summary) {
-        read_span(path, &mut file, record.offset, record.length, file_size, options, &mut buffer)?;
+        read_span(
+            path,
+            &mut file,
+            record.offset,
+            record.length,
+            file_size,
+            options,
+            &mut buffer,
+        )?;
         let parsed = parse_whole_record(path, &buffer, record.offset)?;
         let item = match parsed {
             Record::Metadata(metadata) => {
@@ -112,15 +126,27 @@ pub(super) fn read(
             _ => {
                 return Err(InputError::Invalid {
                     path: path.to_path_buf(),
-                    what: format!("index at byte {} does not point to a metadata or attachment record", record.offset),
-                })
+                    what: format!(
+                        "index at byte {} does not point to a metadata or attachment record",
+                        record.offset
+                    ),
+                });
             }
         };
         if sink(item).is_break() {
             return Err(InputError::Stopped);
         }
     }
-    read_messages(path, &mut file, file_size, summary, options, strict, &mut report, sink)?;
+    read_messages(
+        path,
+        &mut file,
+        file_size,
+        summary,
+        options,
+        strict,
+        &mut report,
+        sink,
+    )?;
     Ok(report)
 }
 
@@ -134,13 +160,14 @@ fn side_records(summary: &mcap::Summary) -> Vec<SideRecord> {
     let mut records: Vec<SideRecord> = summary
         .metadata_indexes
         .iter()
-        .map(|m| SideRecord { offset: m.offset, length: m.length })
-        .chain(
-            summary
-                .attachment_indexes
-                .iter()
-                .map(|a| SideRecord { offset: a.offset, length: a.length }),
-        )
+        .map(|m| SideRecord {
+            offset: m.offset,
+            length: m.length,
+        })
+        .chain(summary.attachment_indexes.iter().map(|a| SideRecord {
+            offset: a.offset,
+            length: a.length,
+        }))
         .collect();
     records.sort_by_key(|r| r.offset);
     records
@@ -175,20 +202,29 @@ fn read_messages(
                 if options.verify_crc
                     && let Some(index) = index
                 {
-                    verify_chunk(path, file, file_size, index, options, &mut chunk_buffer).or_else(
-                        |err| {
+                    verify_chunk(path, file, file_size, index, options, &mut chunk_buffer)
+                        .or_else(|err| {
                             if strict {
                                 return Err(err);
                             }
                             report.bad_crc_chunks += 1;
                             report.warnings.push(InputWarning {
-                                message: format!("{err}; its messages are copied unchanged but may be corrupt"),
+                                message: format!(
+                                    "{err}; its messages are copied unchanged but may be corrupt"
+                                ),
                             });
                             Ok(())
-                        },
-                    )?;
+                        })?;
                 }
-                read_span(path, file, offset, length as u64, file_size, options, &mut chunk_buffer)?;
+                read_span(
+                    path,
+                    file,
+                    offset,
+                    length as u64,
+                    file_size,
+                    options,
+                    &mut chunk_buffer,
+                )?;
                 reader
                     .insert_chunk_record_data(offset, &chunk_buffer)
                     .map_err(|e| mcap_err(&format!("chunk at byte {offset} is unreadable"), e))?;
@@ -250,7 +286,11 @@ fn read_span(
 }
 
 /// Parse a record read whole (opcode, length, body).
-fn parse_whole_record<'a>(path: &Path, bytes: &'a [u8], offset: u64) -> Result<Record<'a>, InputError> {
+fn parse_whole_record<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    offset: u64,
+) -> Result<Record<'a>, InputError> {
     let invalid = |what: String| InputError::Invalid {
         path: path.to_path_buf(),
         what,
@@ -263,7 +303,11 @@ fn parse_whole_record<'a>(path: &Path, bytes: &'a [u8], offset: u64) -> Result<R
     let body = bytes
         .get(9..)
         .filter(|b| b.len() as u64 == body_len)
-        .ok_or_else(|| invalid(format!("record at byte {offset} has a length that does not match its index")))?;
+        .ok_or_else(|| {
+            invalid(format!(
+                "record at byte {offset} has a length that does not match its index"
+            ))
+        })?;
     mcap::parse_record(opcode, body).map_err(|source| InputError::Mcap {
         path: path.to_path_buf(),
         what: format!("record at byte {offset} is malformed"),
@@ -287,15 +331,34 @@ fn verify_chunk(
         end_ns: index.message_end_time,
         reason,
     };
-    read_span(path, file, index.chunk_start_offset, index.chunk_length, file_size, options, buffer)?;
-    let Record::Chunk { header, data } = parse_whole_record(path, buffer, index.chunk_start_offset)? else {
-        return Err(bad("the chunk index does not point to a chunk record".into()));
+    read_span(
+        path,
+        file,
+        index.chunk_start_offset,
+        index.chunk_length,
+        file_size,
+        options,
+        buffer,
+    )?;
+    let Record::Chunk { header, data } =
+        parse_whole_record(path, buffer, index.chunk_start_offset)?
+    else {
+        return Err(bad(
+            "the chunk index does not point to a chunk record".into()
+        ));
     };
     if header.uncompressed_size > options.record_length_limit as u64 {
-        return Err(bad(format!("uncompressed size {} is above the record limit", header.uncompressed_size)));
+        return Err(bad(format!(
+            "uncompressed size {} is above the record limit",
+            header.uncompressed_size
+        )));
     }
-    let uncompressed = decompress(&header.compression, &data, header.uncompressed_size as usize)
-        .map_err(|e| bad(format!("cannot decompress: {e}")))?;
+    let uncompressed = decompress(
+        &header.compression,
+        &data,
+        header.uncompressed_size as usize,
+    )
+    .map_err(|e| bad(format!("cannot decompress: {e}")))?;
     if uncompressed.len() as u64 != header.uncompressed_size {
         return Err(bad(format!(
             "decompressed to {} bytes, header says {}",
@@ -318,18 +381,28 @@ fn verify_chunk(
 
 /// Decompress a chunk body. Output is capped at `expected_size` + 1 so a hostile
 /// stream cannot balloon memory.
-pub(super) fn decompress(compression: &str, data: &[u8], expected_size: usize) -> Result<Vec<u8>, String> {
+pub(super) fn decompress(
+    compression: &str,
+    data: &[u8],
+    expected_size: usize,
+) -> Result<Vec<u8>, String> {
     let limit = expected_size as u64 + 1;
     let mut out = Vec::with_capacity(expected_size.min(64 << 20));
     match compression {
         "" => out.extend_from_slice(data),
         "zstd" => {
             let decoder = zstd::stream::read::Decoder::new(data).map_err(|e| e.to_string())?;
-            decoder.take(limit).read_to_end(&mut out).map_err(|e| e.to_string())?;
+            decoder
+                .take(limit)
+                .read_to_end(&mut out)
+                .map_err(|e| e.to_string())?;
         }
         "lz4" => {
             let decoder = lz4::Decoder::new(data).map_err(|e| e.to_string())?;
-            decoder.take(limit).read_to_end(&mut out).map_err(|e| e.to_string())?;
+            decoder
+                .take(limit)
+                .read_to_end(&mut out)
+                .map_err(|e| e.to_string())?;
         }
         other => return Err(format!("unsupported compression `{other}`")),
     }
@@ -354,19 +427,34 @@ pub(super) fn channel_time_spans(
         let Some(&start) = chunk.message_index_offsets.values().min() else {
             continue;
         };
-        if read_span(path, &mut file, start, chunk.message_index_length, file_size, options, &mut buffer).is_err() {
+        if read_span(
+            path,
+            &mut file,
+            start,
+            chunk.message_index_length,
+            file_size,
+            options,
+            &mut buffer,
+        )
+        .is_err()
+        {
             return BTreeMap::new();
         }
         let mut rest = buffer.as_slice();
         while rest.len() >= 9 {
             let opcode = rest[0];
             let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
-            let Some(body) = usize::try_from(len).ok().and_then(|len| rest.get(9..9 + len)) else {
+            let Some(body) = usize::try_from(len)
+                .ok()
+                .and_then(|len| rest.get(9..9 + len))
+            else {
                 break;
             };
             if let Ok(Record::MessageIndex(index)) = mcap::parse_record(opcode, body) {
                 for entry in &index.records {
-                    let span = spans.entry(index.channel_id).or_insert((entry.log_time, entry.log_time));
+                    let span = spans
+                        .entry(index.channel_id)
+                        .or_insert((entry.log_time, entry.log_time));
                     span.0 = span.0.min(entry.log_time);
                     span.1 = span.1.max(entry.log_time);
                 }

@@ -7,7 +7,7 @@ use std::io::Read;
 use std::path::Path;
 use std::sync::Arc;
 
-use mcap::records::{op, Record};
+use mcap::records::{Record, op};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{Channel, Schema};
 
@@ -55,16 +55,18 @@ fn scan_records(
             Err(err) => {
                 return Ok(Some(Stop {
                     reason: describe_stop(&err, bytes_fed),
-                }))
+                }));
             }
         };
         match event {
             LinearReadEvent::ReadRequest(need) => {
-                let read = file.read(reader.insert(need)).map_err(|source| InputError::Io {
-                    path: path.to_path_buf(),
-                    offset: bytes_fed,
-                    source,
-                })?;
+                let read = file
+                    .read(reader.insert(need))
+                    .map_err(|source| InputError::Io {
+                        path: path.to_path_buf(),
+                        offset: bytes_fed,
+                        source,
+                    })?;
                 bytes_fed += read as u64;
                 reader.notify_read(read);
             }
@@ -82,8 +84,10 @@ fn scan_records(
                     Ok(record) => record,
                     Err(err) => {
                         return Ok(Some(Stop {
-                            reason: format!("malformed record (opcode {opcode:#04x}) near byte {bytes_fed}: {err}"),
-                        }))
+                            reason: format!(
+                                "malformed record (opcode {opcode:#04x}) near byte {bytes_fed}: {err}"
+                            ),
+                        }));
                     }
                 };
                 let seen = match record {

@@ -109,7 +109,9 @@ pub enum InputError {
         what: String,
         source: mcap::McapError,
     },
-    #[error("{path}: chunk at byte {offset} (log time {start_ns}..{end_ns} ns) failed its CRC check: {reason}")]
+    #[error(
+        "{path}: chunk at byte {offset} (log time {start_ns}..{end_ns} ns) failed its CRC check: {reason}"
+    )]
     BadChunk {
         path: PathBuf,
         offset: u64,
@@ -182,7 +184,9 @@ impl InputFile {
         let catalog = match &summary {
             Some(summary) => {
                 let mut catalog = Catalog::from_summary(summary);
-                for (channel_id, (first, last)) in indexed::channel_time_spans(path, summary, &options) {
+                for (channel_id, (first, last)) in
+                    indexed::channel_time_spans(path, summary, &options)
+                {
                     catalog.first_log_time_ns.insert(channel_id, first);
                     catalog.last_log_time_ns.insert(channel_id, last);
                 }

@@ -59,7 +59,10 @@ impl ReorderWindow {
 
     /// Add a message; returns the messages now safe to release, in order.
     pub(super) fn push(&mut self, message: InputMessage, out: &mut Vec<InputMessage>) {
-        if self.last_released_ns.is_some_and(|last| message.log_time_ns < last) {
+        if self
+            .last_released_ns
+            .is_some_and(|last| message.log_time_ns < last)
+        {
             // Too late to put in order: pass it on now rather than lose it.
             self.late += 1;
             out.push(message);
@@ -125,7 +128,10 @@ mod tests {
     #[test]
     fn restores_order_within_the_window() {
         let mut window = ReorderWindow::new(10, usize::MAX);
-        assert_eq!(run(&mut window, &[5, 3, 8, 4, 12, 9, 20]), vec![3, 4, 5, 8, 9, 12, 20]);
+        assert_eq!(
+            run(&mut window, &[5, 3, 8, 4, 12, 9, 20]),
+            vec![3, 4, 5, 8, 9, 12, 20]
+        );
         assert_eq!(window.late, 0);
     }
 
@@ -148,7 +154,10 @@ mod tests {
             window.push(m, &mut out);
         }
         window.drain(&mut out);
-        assert_eq!(out.iter().map(|m| m.sequence).collect::<Vec<_>>(), vec![0, 1, 2, 3, 4]);
+        assert_eq!(
+            out.iter().map(|m| m.sequence).collect::<Vec<_>>(),
+            vec![0, 1, 2, 3, 4]
+        );
     }
 
     #[test]

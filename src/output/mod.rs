@@ -242,7 +242,10 @@ impl OutputWriter {
             .map_err(|e| self.write_err(e))
     }
 
-    pub fn write_metadata(&mut self, metadata: &mcap::records::Metadata) -> Result<(), OutputError> {
+    pub fn write_metadata(
+        &mut self,
+        metadata: &mcap::records::Metadata,
+    ) -> Result<(), OutputError> {
         self.writer
             .write_metadata(metadata)
             .map_err(|e| self.write_err(e))

@@ -19,13 +19,40 @@ pub struct RawMessage {
     pub data: Vec<u8>,
 }
 
+/// A schema record as read back.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SchemaRecord {
+    pub id: u16,
+    pub name: String,
+    pub encoding: String,
+    pub data: Vec<u8>,
+}
+
+/// A channel record as read back, with its schema.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelRecord {
+    pub topic: String,
+    pub message_encoding: String,
+    pub schema: Option<SchemaRecord>,
+}
+
+/// An attachment as read back.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AttachmentRecord {
+    pub name: String,
+    pub media_type: String,
+    pub log_time: u64,
+    pub create_time: u64,
+    pub data: Vec<u8>,
+}
+
 /// Everything in a file, read linearly.
 pub struct FileContents {
     pub profile: String,
     pub messages: Vec<RawMessage>,
-    pub channels: BTreeMap<u16, (String, String, Option<(u16, String, String, Vec<u8>)>)>,
+    pub channels: BTreeMap<u16, ChannelRecord>,
     pub metadata: Vec<mcap::records::Metadata>,
-    pub attachments: Vec<(String, String, u64, u64, Vec<u8>)>,
+    pub attachments: Vec<AttachmentRecord>,
 }
 
 impl FileContents {
@@ -33,17 +60,19 @@ impl FileContents {
         let ids: Vec<u16> = self
             .channels
             .iter()
-            .filter(|(_, (t, _, _))| t == topic)
+            .filter(|(_, channel)| channel.topic == topic)
             .map(|(id, _)| *id)
             .collect();
-        self.messages.iter().filter(|m| ids.contains(&m.channel_id)).collect()
+        self.messages
+            .iter()
+            .filter(|m| ids.contains(&m.channel_id))
+            .collect()
     }
 }
 
 /// Read every record of `bytes` with the mcap crate's linear reader, checking
 /// CRCs, and fail the test on any error (a valid, complete MCAP).
 pub fn read_all(bytes: &[u8]) -> FileContents {
-    use mcap::records::Record;
     let mut contents = FileContents {
         profile: String::new(),
         messages: Vec::new(),
@@ -51,62 +80,68 @@ pub fn read_all(bytes: &[u8]) -> FileContents {
         metadata: Vec::new(),
         attachments: Vec::new(),
     };
-    let mut schemas: BTreeMap<u16, (u16, String, String, Vec<u8>)> = BTreeMap::new();
+    let mut schemas = BTreeMap::new();
     for record in mcap::read::LinearReader::new(bytes).expect("valid magic") {
-        match record.expect("every record of the output parses and its CRCs match") {
-            Record::Header(header) => contents.profile = header.profile,
-            Record::Schema { header, data } => {
-                schemas.insert(header.id, (header.id, header.name, header.encoding, data.into_owned()));
+        let record = record.expect("every record of the output parses and its CRCs match");
+        if let mcap::records::Record::Chunk { header, data } = record {
+            let inner = decompress_chunk(&header, &data);
+            for inner_record in mcap::read::LinearReader::sans_magic(&inner) {
+                absorb(
+                    inner_record.expect("records inside chunks parse"),
+                    &mut schemas,
+                    &mut contents,
+                );
             }
-            Record::Channel(channel) => {
-                let schema = schemas.get(&channel.schema_id).cloned();
-                contents
-                    .channels
-                    .insert(channel.id, (channel.topic, channel.message_encoding, schema));
-            }
-            Record::Message { header, data } => contents.messages.push(RawMessage {
-                channel_id: header.channel_id,
-                sequence: header.sequence,
-                log_time: header.log_time,
-                publish_time: header.publish_time,
-                data: data.into_owned(),
-            }),
-            Record::Metadata(metadata) => contents.metadata.push(metadata),
-            Record::Attachment { header, data, .. } => contents.attachments.push((
-                header.name,
-                header.media_type,
-                header.log_time,
-                header.create_time,
-                data.into_owned(),
-            )),
-            Record::Chunk { header, data } => {
-                let inner = decompress_chunk(&header, &data);
-                for inner_record in mcap::read::LinearReader::sans_magic(&inner) {
-                    match inner_record.expect("records inside chunks parse") {
-                        Record::Schema { header, data } => {
-                            schemas.insert(header.id, (header.id, header.name, header.encoding, data.into_owned()));
-                        }
-                        Record::Channel(channel) => {
-                            let schema = schemas.get(&channel.schema_id).cloned();
-                            contents
-                                .channels
-                                .insert(channel.id, (channel.topic, channel.message_encoding, schema));
-                        }
-                        Record::Message { header, data } => contents.messages.push(RawMessage {
-                            channel_id: header.channel_id,
-                            sequence: header.sequence,
-                            log_time: header.log_time,
-                            publish_time: header.publish_time,
-                            data: data.into_owned(),
-                        }),
-                        _ => {}
-                    }
-                }
-            }
-            _ => {}
+        } else {
+            absorb(record, &mut schemas, &mut contents);
         }
     }
     contents
+}
+
+/// File one record into `contents`.
+fn absorb(
+    record: mcap::records::Record<'_>,
+    schemas: &mut BTreeMap<u16, SchemaRecord>,
+    contents: &mut FileContents,
+) {
+    use mcap::records::Record;
+    match record {
+        Record::Header(header) => contents.profile = header.profile,
+        Record::Schema { header, data } => {
+            let schema = SchemaRecord {
+                id: header.id,
+                name: header.name,
+                encoding: header.encoding,
+                data: data.into_owned(),
+            };
+            schemas.insert(schema.id, schema);
+        }
+        Record::Channel(channel) => {
+            let record = ChannelRecord {
+                topic: channel.topic,
+                message_encoding: channel.message_encoding,
+                schema: schemas.get(&channel.schema_id).cloned(),
+            };
+            contents.channels.insert(channel.id, record);
+        }
+        Record::Message { header, data } => contents.messages.push(RawMessage {
+            channel_id: header.channel_id,
+            sequence: header.sequence,
+            log_time: header.log_time,
+            publish_time: header.publish_time,
+            data: data.into_owned(),
+        }),
+        Record::Metadata(metadata) => contents.metadata.push(metadata),
+        Record::Attachment { header, data, .. } => contents.attachments.push(AttachmentRecord {
+            name: header.name,
+            media_type: header.media_type,
+            log_time: header.log_time,
+            create_time: header.create_time,
+            data: data.into_owned(),
+        }),
+        _ => {}
+    }
 }
 
 fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Vec<u8> {
@@ -116,7 +151,10 @@ fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Vec<u8>
         "zstd" => zstd::decode_all(data).expect("zstd chunk"),
         "lz4" => {
             let mut out = Vec::new();
-            lz4::Decoder::new(data).unwrap().read_to_end(&mut out).unwrap();
+            lz4::Decoder::new(data)
+                .unwrap()
+                .read_to_end(&mut out)
+                .unwrap();
             out
         }
         other => panic!("unexpected compression {other}"),
@@ -165,9 +203,17 @@ pub fn assert_all_input_messages_copied(input: &FileContents, output: &FileConte
         .collect();
     expected.sort();
     actual.sort();
-    assert_eq!(expected.len(), actual.len(), "number of copied input messages");
+    assert_eq!(
+        expected.len(),
+        actual.len(),
+        "number of copied input messages"
+    );
     assert!(expected == actual, "copied messages differ from the input");
     for (id, channel) in &input.channels {
-        assert_eq!(output.channels.get(id), Some(channel), "channel {id} copied with its schema under the same ids");
+        assert_eq!(
+            output.channels.get(id),
+            Some(channel),
+            "channel {id} copied with its schema under the same ids"
+        );
     }
 }
