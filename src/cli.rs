@@ -18,7 +18,7 @@ Exit codes:
   0  success (bad messages, if any, were skipped and are counted in the summary)
   1  failure: unreadable input, I/O error, output could not be written
   2  usage: bad arguments, unknown or ambiguous topic, output exists (see --force)
-     or is the input
+     or is the input, input already processed
   3  --strict and the input had a bad message, a bad chunk CRC or was truncated";
 
 /// Looming (inverse time to contact) from LiDAR drive logs in MCAP.
@@ -184,7 +184,9 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
     progress.bar.finish_and_clear();
     let summary = result.map_err(|error| {
         let code = match &error {
-            ProcessError::Topic { .. } | ProcessError::Config(_) => 2,
+            ProcessError::Topic { .. }
+            | ProcessError::Config(_)
+            | ProcessError::AlreadyProcessed { .. } => 2,
             ProcessError::Output(
                 looming::output::OutputError::Exists { .. }
                 | looming::output::OutputError::SameAsInput { .. },

@@ -102,6 +102,8 @@ pub enum ProcessError {
     Topic { path: PathBuf, source: TopicError },
     #[error("invalid option: {0}")]
     Config(String),
+    #[error("{path}: already holds looming output ({topics}); process the original log instead")]
+    AlreadyProcessed { path: PathBuf, topics: String },
     #[error("bad input (strict mode): {0}")]
     Strict(String),
     #[error("internal error: {0}")]
@@ -173,6 +175,7 @@ pub fn process(
         None => None,
     };
     let mut input = InputFile::open(&config.input, config.input_options.clone())?;
+    refuse_processed_input(&input)?;
     let mut restarted_because = None;
     loop {
         let topics =
@@ -200,6 +203,24 @@ pub fn process(
         }
         return finish_run(config, &input, topics, outcome, started, restarted_because);
     }
+}
+
+/// A log that already carries `/looming/*` channels would end up with two sets.
+fn refuse_processed_input(input: &InputFile) -> Result<(), ProcessError> {
+    let ours: Vec<&str> = input
+        .catalog()
+        .channels
+        .values()
+        .filter(|c| c.topic.starts_with("/looming/"))
+        .map(|c| c.topic.as_str())
+        .collect();
+    if ours.is_empty() {
+        return Ok(());
+    }
+    Err(ProcessError::AlreadyProcessed {
+        path: input.path().to_path_buf(),
+        topics: ours.join(", "),
+    })
 }
 
 /// The result of one pass before the output is finalised.

@@ -590,3 +590,25 @@ fn verify_checks_chunk_crcs() {
     ]);
     assert_eq!(strict.status.code(), Some(3), "{}", stderr(&strict));
 }
+
+#[test]
+fn an_already_processed_log_is_refused() {
+    let dir = scratch("reprocess");
+    let input = drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ));
+    process(&dir, &input, &[]);
+    let again = looming(&[
+        "process",
+        dir.join("out.mcap").to_str().unwrap(),
+        "-o",
+        dir.join("again.mcap").to_str().unwrap(),
+    ]);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(
+        stderr(&again).contains("/looming/pairs"),
+        "{}",
+        stderr(&again)
+    );
+}

@@ -1,0 +1,26 @@
+//! Write a fixture drive log of any size, for measuring `looming process`:
+//! `cargo run --release --example drive_log -- OUT.mcap [SCANS] [BEAMS] [COLUMNS]`.
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let Some(out) = args.get(1) else {
+        eprintln!("usage: drive_log OUT.mcap [SCANS] [BEAMS] [COLUMNS]");
+        std::process::exit(2);
+    };
+    let number = |i: usize, default: u32| {
+        args.get(i)
+            .map_or(default, |a| a.parse().expect("a number"))
+    };
+    let spec = looming::fixtures::DriveSpec {
+        scans: number(2, 600),
+        beams: number(3, 64) as u16,
+        columns: number(4, 2048),
+        wall_distance_m: 1000.0,
+        layout: looming::fixtures::Layout {
+            chunk_size: 4 << 20,
+            ..looming::fixtures::Layout::indexed()
+        },
+        ..looming::fixtures::DriveSpec::default()
+    };
+    std::fs::write(out, looming::fixtures::drive_log(&spec)).expect("write the log");
+}
