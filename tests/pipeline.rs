@@ -230,66 +230,140 @@ fn our_ids_do_not_collide_with_input_ids() {
     let _: serde_json::Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
 }
 
-/// Cut the file in the middle of its third chunk.
-fn truncated_mid_chunk(bytes: &[u8]) -> (Vec<u8>, u64) {
+/// Cut the file inside its third chunk, `fraction` of the way through it;
+/// returns the cut file and the index of the cut chunk.
+fn truncated_mid_chunk(bytes: &[u8], fraction: f64) -> (Vec<u8>, mcap::records::ChunkIndex) {
     let summary = mcap::Summary::read(bytes).unwrap().unwrap();
     let mut chunks = summary.chunk_indexes.clone();
     chunks.sort_by_key(|c| c.chunk_start_offset);
     assert!(chunks.len() >= 4, "the fixture needs several chunks");
-    let cut_chunk = &chunks[2];
-    let cut = cut_chunk.chunk_start_offset + cut_chunk.chunk_length / 2;
-    (bytes[..cut as usize].to_vec(), cut_chunk.chunk_start_offset)
+    let cut_chunk = chunks[2].clone();
+    let cut = cut_chunk.chunk_start_offset + (cut_chunk.chunk_length as f64 * fraction) as u64;
+    (bytes[..cut as usize].to_vec(), cut_chunk)
 }
 
-#[test]
-fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
-    let dir = scratch("truncated");
-    let layout = Layout {
-        chunk_size: 16 * 1024,
-        ..Layout::indexed()
+/// Messages of `full` stored in chunks wholly before `cut_chunk`, and those of
+/// `cut_chunk` whose records end before byte `cut` (meaningful for an
+/// uncompressed chunk, where record offsets are file offsets).
+fn messages_before_cut(
+    full: &[u8],
+    cut_chunk: &mcap::records::ChunkIndex,
+    cut: u64,
+) -> (Vec<RawMessage>, Vec<RawMessage>) {
+    let summary = mcap::Summary::read(full).unwrap().unwrap();
+    let raw = |message: mcap::Message| RawMessage {
+        channel_id: message.channel.id,
+        sequence: message.sequence,
+        log_time: message.log_time,
+        publish_time: message.publish_time,
+        data: message.data.into_owned(),
     };
-    let full = drive_log(&spec(Encoding::Ros2 { big_endian: false }, layout));
-    let (cut, first_lost_chunk_offset) = truncated_mid_chunk(&full);
-    // The messages stored in the chunks wholly before the cut.
-    let kept: Vec<RawMessage> = {
-        let summary = mcap::Summary::read(&full).unwrap().unwrap();
-        let mut messages = Vec::new();
-        for chunk in summary
-            .chunk_indexes
-            .iter()
-            .filter(|c| c.chunk_start_offset < first_lost_chunk_offset)
-        {
-            for message in summary.stream_chunk(&full, chunk).unwrap() {
-                let message = message.unwrap();
-                messages.push(RawMessage {
-                    channel_id: message.channel.id,
-                    sequence: message.sequence,
-                    log_time: message.log_time,
-                    publish_time: message.publish_time,
-                    data: message.data.into_owned(),
-                });
+    let mut whole = Vec::new();
+    for chunk in summary
+        .chunk_indexes
+        .iter()
+        .filter(|c| c.chunk_start_offset < cut_chunk.chunk_start_offset)
+    {
+        whole.extend(
+            summary
+                .stream_chunk(full, chunk)
+                .unwrap()
+                .map(|m| raw(m.unwrap())),
+        );
+    }
+    let records_start = cut_chunk.compressed_data_offset().unwrap();
+    let indexes = summary.read_message_indexes(full, cut_chunk).unwrap();
+    let mut in_cut_chunk = Vec::new();
+    for entries in indexes.values() {
+        for entry in entries {
+            let message = summary.seek_message(full, cut_chunk, entry).unwrap();
+            let record_end = records_start + entry.offset + 9 + 22 + message.data.len() as u64;
+            if record_end <= cut {
+                in_cut_chunk.push(raw(message));
             }
         }
-        messages
-    };
-    assert!(!kept.is_empty());
-    let (summary, output, _) = process(&dir, &cut, &[]);
-    let mut expected = kept.clone();
-    let mut actual: Vec<RawMessage> = output
+    }
+    (whole, in_cut_chunk)
+}
+
+/// (channel, sequence, log time) of each message: short enough to print.
+fn keys(messages: &[RawMessage]) -> Vec<(u16, u32, u64)> {
+    messages
+        .iter()
+        .map(|m| (m.channel_id, m.sequence, m.log_time))
+        .collect()
+}
+
+fn input_messages(contents: &FileContents) -> Vec<RawMessage> {
+    let mut messages: Vec<RawMessage> = contents
         .messages
         .iter()
         .filter(|m| m.channel_id <= 5)
         .cloned()
         .collect();
-    expected.sort();
-    actual.sort();
-    assert_eq!(
-        actual, expected,
-        "exactly the complete messages before the cut"
-    );
-    assert_eq!(summary["read"]["mode"], "linear");
-    let warnings = summary["warnings"].to_string();
-    assert!(warnings.contains("truncated"), "{warnings}");
+    messages.sort();
+    messages
+}
+
+#[test]
+fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
+    let dir = scratch("truncated");
+    // zstd decodes whole blocks (up to 128 KiB of data each), so its chunks
+    // must span several and the cut must leave some whole.
+    for (name, compression, chunk_size, fraction) in [
+        ("uncompressed", None, 64 * 1024, 0.5),
+        ("zstd", Some(mcap::Compression::Zstd), 512 * 1024, 0.9),
+    ] {
+        let layout = Layout {
+            chunk_size,
+            compression,
+            ..Layout::indexed()
+        };
+        let full = drive_log(&DriveSpec {
+            scans: 40,
+            ..spec(Encoding::Ros2 { big_endian: false }, layout)
+        });
+        let (cut, cut_chunk) = truncated_mid_chunk(&full, fraction);
+        let (whole, in_cut_chunk) = messages_before_cut(&full, &cut_chunk, cut.len() as u64);
+        assert!(!whole.is_empty());
+        let (summary, output, _) = process(&dir, &cut, &[]);
+        let actual = input_messages(&output);
+        let mut expected = whole.clone();
+        if compression.is_none() {
+            // Every record wholly before the cut, the cut chunk's included.
+            assert!(
+                !in_cut_chunk.is_empty(),
+                "the cut chunk starts with complete messages"
+            );
+            expected.extend(in_cut_chunk);
+            expected.sort();
+            assert_eq!(
+                keys(&actual),
+                keys(&expected),
+                "{name}: exactly the complete messages before the cut"
+            );
+            assert!(actual == expected, "{name}: unchanged bytes");
+        } else {
+            // zstd: the complete chunks, plus what the cut stream decompresses to.
+            expected.sort();
+            assert!(
+                actual.len() > expected.len(),
+                "{name}: salvaged part of the cut chunk"
+            );
+            let all = input_messages(&read_all(&full));
+            assert!(
+                actual.iter().all(|m| all.contains(m)),
+                "{name}: only real messages"
+            );
+            assert!(
+                expected.iter().all(|m| actual.contains(m)),
+                "{name}: every complete chunk kept"
+            );
+        }
+        assert_eq!(summary["read"]["mode"], "linear");
+        let warnings = summary["warnings"].to_string();
+        assert!(warnings.contains("truncated"), "{warnings}");
+    }
 
     // Strict mode refuses it.
     let strict = looming(&[

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
+#[allow(unused_imports)]
 pub use looming::fixtures::{DriveSpec, Encoding, Layout, drive_log};
 
 /// A message as an independent reader sees it.
