@@ -18,6 +18,14 @@ fn spec(encoding: Encoding, layout: Layout) -> DriveSpec {
     }
 }
 
+/// The fixture drive in ROS 2 CDR, chunked with summary.
+fn default_drive() -> Vec<u8> {
+    drive_log(&spec(
+        Encoding::Ros2 { big_endian: false },
+        Layout::indexed(),
+    ))
+}
+
 fn encodings() -> [(&'static str, Encoding); 3] {
     [
         ("ros2-le", Encoding::Ros2 { big_endian: false }),
@@ -198,10 +206,7 @@ fn messages_come_out_in_log_time_order() {
 #[test]
 fn the_same_input_gives_a_byte_identical_output() {
     let dir = scratch("determinism");
-    let input = drive_log(&spec(
-        Encoding::Ros2 { big_endian: false },
-        Layout::indexed(),
-    ));
+    let input = default_drive();
     let (_, _, first) = process(&dir, &input, &[]);
     let (_, _, second) = process(&dir, &input, &[]);
     assert!(first == second);
@@ -388,10 +393,7 @@ fn copy_channels(contents: &FileContents, log: &mut looming::fixtures::LogBuilde
 
 /// A drive whose IMU message 5 and scan 3 are replaced by garbage.
 fn log_with_bad_messages() -> Vec<u8> {
-    let good = drive_log(&spec(
-        Encoding::Ros2 { big_endian: false },
-        Layout::indexed(),
-    ));
+    let good = default_drive();
     let contents = read_all(&good);
     let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
     copy_channels(&contents, &mut log);
@@ -451,10 +453,7 @@ fn bad_messages_are_skipped_counted_and_named() {
 #[test]
 fn output_paths_are_guarded() {
     let dir = scratch("paths");
-    let input = drive_log(&spec(
-        Encoding::Ros2 { big_endian: false },
-        Layout::indexed(),
-    ));
+    let input = default_drive();
     let in_path = dir.join("in.mcap");
     write(&in_path, &input);
     let same = looming(&[
@@ -497,10 +496,7 @@ fn output_paths_are_guarded() {
 #[test]
 fn ambiguous_and_unknown_topics_list_the_candidates() {
     let dir = scratch("topics");
-    let good = drive_log(&spec(
-        Encoding::Ros2 { big_endian: false },
-        Layout::indexed(),
-    ));
+    let good = default_drive();
     let contents = read_all(&good);
     // Add a second LiDAR channel carrying the same scans.
     let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
@@ -668,10 +664,7 @@ fn verify_checks_chunk_crcs() {
 #[test]
 fn an_already_processed_log_is_refused() {
     let dir = scratch("reprocess");
-    let input = drive_log(&spec(
-        Encoding::Ros2 { big_endian: false },
-        Layout::indexed(),
-    ));
+    let input = default_drive();
     process(&dir, &input, &[]);
     let again = looming(&[
         "process",

@@ -231,13 +231,7 @@ fn read_messages(
             }
             IndexedReadEvent::Message { header, data } => {
                 report.messages += 1;
-                let message = InputMessage {
-                    channel_id: header.channel_id,
-                    sequence: header.sequence,
-                    log_time_ns: header.log_time,
-                    publish_time_ns: header.publish_time,
-                    data: data.to_vec(),
-                };
+                let message = InputMessage::new(&header, data);
                 if sink(InputRecord::Message(message)).is_break() {
                     return Err(InputError::Stopped);
                 }

@@ -182,13 +182,7 @@ pub(super) fn read(
     let stop = scan_records(path, options, &mut |seen| {
         let side_record = match seen {
             Seen::Message(header, data) => {
-                let message = InputMessage {
-                    channel_id: header.channel_id,
-                    sequence: header.sequence,
-                    log_time_ns: header.log_time,
-                    publish_time_ns: header.publish_time,
-                    data: data.to_vec(),
-                };
+                let message = InputMessage::new(&header, data);
                 window.push(message, &mut ready);
                 return Ok(release(&mut ready, &mut report, sink));
             }

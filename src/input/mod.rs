@@ -42,6 +42,19 @@ pub struct InputMessage {
     pub data: Vec<u8>,
 }
 
+impl InputMessage {
+    /// An owned copy of a message record.
+    pub fn new(header: &mcap::records::MessageHeader, data: &[u8]) -> Self {
+        Self {
+            channel_id: header.channel_id,
+            sequence: header.sequence,
+            log_time_ns: header.log_time,
+            publish_time_ns: header.publish_time,
+            data: data.to_vec(),
+        }
+    }
+}
+
 /// One attachment, owned.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct InputAttachment {
