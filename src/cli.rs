@@ -42,6 +42,48 @@ enum Command {
     /// `process` would use.
     #[command(after_help = EXIT_CODES)]
     Inspect(InspectArgs),
+    /// Write a synthetic drive with analytic ground truth (/truth/*) as a ROS 2 MCAP.
+    ///
+    /// Built-in scenarios: straight-road, urban-turn, follow, cut-in, crossing,
+    /// safe-drive (see docs/scenarios.md); or a scenario JSON file.
+    #[command(after_help = EXIT_CODES)]
+    Synth(SynthArgs),
+}
+
+#[derive(Debug, Args)]
+struct SynthArgs {
+    /// Built-in scenario name or scenario JSON file.
+    #[arg(long, value_name = "NAME|FILE.json")]
+    scenario: String,
+    /// Output MCAP file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Seed of the range and IMU noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Length of the drive, seconds [default: the scenario's].
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+    /// Write only the part of the drive from this time on, seconds (the
+    /// scenario still starts at 0; stamps keep their times).
+    #[arg(long, value_name = "SECONDS")]
+    start: Option<f64>,
+    /// LiDAR beams [default: the scenario's, 64].
+    #[arg(long)]
+    beams: Option<u16>,
+    /// LiDAR columns per revolution [default: the scenario's, 2048].
+    #[arg(long)]
+    columns: Option<u32>,
+    /// zstd level of the output chunks (1-22; higher is smaller and slower)
+    /// [default: 3].
+    #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]
+    compression_level: Option<u32>,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    force: bool,
+    /// No summary on stderr.
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -126,7 +168,59 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Process(args) => process(args),
         Command::Inspect(args) => inspect(args),
+        Command::Synth(args) => synth(args),
     }
+}
+
+fn synth(args: SynthArgs) -> Result<(), Failure> {
+    let options = looming::synth::SynthOptions {
+        scenario: args.scenario,
+        output: args.output,
+        seed: args.seed,
+        start_s: args.start,
+        duration_s: args.duration,
+        beams: args.beams,
+        columns: args.columns,
+        output_options: OutputOptions {
+            force: args.force,
+            compression_level: args.compression_level.unwrap_or(0),
+            ..OutputOptions::default()
+        },
+    };
+    let summary = looming::synth::synthesize(&options).map_err(|error| {
+        let code = match &error {
+            looming::synth::SynthError::Scenario(_)
+            | looming::synth::SynthError::Output(looming::output::OutputError::Exists { .. }) => 2,
+            _ => 1,
+        };
+        Failure {
+            error: error.into(),
+            code,
+        }
+    })?;
+    if !args.quiet {
+        eprintln!(
+            "looming synth {}: {} scans, {} points, {} messages, {:.1} MB in {:.2} s -> {}",
+            summary.scenario,
+            summary.scans,
+            summary.points,
+            summary.messages,
+            summary.output_bytes as f64 / 1e6,
+            summary.elapsed_s,
+            summary.output
+        );
+        for event in &summary.events {
+            eprintln!(
+                "  planted near miss: actor {} ({}) {:.2}..{:.2} s, min time to contact {:.2} s",
+                event.actor_id,
+                event.label,
+                event.start_s,
+                event.end_s,
+                event.min_time_to_contact_s
+            );
+        }
+    }
+    Ok(())
 }
 
 fn inspect(args: InspectArgs) -> Result<(), Failure> {

@@ -15,4 +15,5 @@ pub mod pairing;
 pub mod pipeline;
 pub mod ros;
 pub mod ros_schemas;
+pub mod synth;
 pub mod topics;

@@ -110,7 +110,8 @@ pub fn candidates(catalog: &Catalog) -> Vec<SelectedChannel> {
     catalog
         .channel_infos()
         .into_iter()
-        .filter(|info| !info.topic.starts_with("/looming/"))
+        // Our own output and synthetic ground truth are never inputs.
+        .filter(|info| !info.topic.starts_with("/looming/") && !info.topic.starts_with("/truth/"))
         .filter_map(|info| {
             let kind = MessageKind::from_schema_name(&info.schema_name)?;
             let encoding = WireEncoding::from_message_encoding(&info.message_encoding)?;
@@ -162,7 +163,19 @@ fn choose(
     role: Role,
     wanted: Option<&str>,
 ) -> Result<Option<SelectedChannel>, TopicError> {
-    let of_role: Vec<&SelectedChannel> = all.iter().filter(|c| c.role == role).collect();
+    let mut of_role: Vec<&SelectedChannel> = all.iter().filter(|c| c.role == role).collect();
+    // A twist is the direct velocity measurement: with one TwistStamped and any
+    // number of Odometry topics, auto-detection takes the twist.
+    if wanted.is_none() && role == Role::Velocity {
+        let twists: Vec<&SelectedChannel> = of_role
+            .iter()
+            .copied()
+            .filter(|c| c.kind == MessageKind::TwistStamped)
+            .collect();
+        if twists.len() == 1 {
+            of_role = twists;
+        }
+    }
     if let Some(topic) = wanted {
         let matching: Vec<&&SelectedChannel> =
             of_role.iter().filter(|c| c.topic == topic).collect();

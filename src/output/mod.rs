@@ -36,6 +36,11 @@ pub struct OutputOptions {
     pub chunk_size_bytes: u64,
     /// Replace an existing output file.
     pub force: bool,
+    /// zstd / lz4 level; 0 = the library default (zstd 3).
+    pub compression_level: u32,
+    /// MCAP header profile: empty for `process` output (our channels are not
+    /// CDR), `ros2` for synthetic logs.
+    pub profile: String,
 }
 
 impl Default for OutputOptions {
@@ -44,6 +49,8 @@ impl Default for OutputOptions {
             compression: OutputCompression::Zstd,
             chunk_size_bytes: 4 << 20,
             force: false,
+            compression_level: 0,
+            profile: String::new(),
         }
     }
 }
@@ -81,6 +88,11 @@ pub fn check_output_path(input: &Path, output: &Path, force: bool) -> Result<(),
             path: output.to_path_buf(),
         });
     }
+    check_overwrite(output, force)
+}
+
+/// Refuse an existing `output` without `force`.
+pub fn check_overwrite(output: &Path, force: bool) -> Result<(), OutputError> {
     if output.exists() && !force {
         return Err(OutputError::Exists {
             path: output.to_path_buf(),
@@ -309,8 +321,8 @@ fn write_options(options: &OutputOptions) -> mcap::WriteOptions {
     mcap::WriteOptions::new()
         .compression(compression)
         .chunk_size(Some(options.chunk_size_bytes))
-        // Our channels are not CDR, so the output claims no profile.
-        .profile("")
+        .profile(options.profile.as_str())
+        .compression_level(options.compression_level)
         .library(format!("looming/{}", env!("CARGO_PKG_VERSION")))
         // Single-threaded zstd: the writer already runs on its own pipeline
         // thread, and this keeps the bytes identical on any machine.

@@ -1,0 +1,422 @@
+//! Turning the simulation into MCAP messages: ROS 2 CDR sensor messages, the
+//! truth point cloud and JSON truth records, in log-time order.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+use crate::output::{OutputError, OutputWriter, OwnChannelSpec};
+use crate::ros::msgs::{
+    Header, Imu, Odometry, PointCloud2, PointField, Pose, PoseWithCovariance, Quaternion,
+    TFMessage, Transform, TransformStamped, Twist, TwistStamped, TwistWithCovariance,
+    Vector3 as RosVector3, datatype, pointcloud2_from_points,
+};
+use crate::ros_schemas::{self, RosDialect};
+
+use super::scene::Scenario;
+use super::sensor::{SimScan, World};
+use super::truth::{TruthEvent, TruthScan};
+
+/// Wall-clock time of the start of every synthetic drive (fixed, so the same
+/// arguments give the same bytes): 2023-11-14T22:13:20Z.
+pub const START_NS: i64 = 1_700_000_000_000_000_000;
+
+pub const LIDAR_FRAME: &str = "lidar";
+pub const VEHICLE_FRAME: &str = "imu_link";
+pub const ODOM_FRAME: &str = "odom";
+
+/// Topics of a synthetic log.
+pub mod topics {
+    pub const LIDAR: &str = "/lidar/points";
+    pub const IMU: &str = "/imu/data";
+    pub const TWIST: &str = "/vehicle/twist";
+    pub const ODOMETRY: &str = "/odom";
+    pub const TF_STATIC: &str = "/tf_static";
+    pub const TRUTH_POINTS: &str = "/truth/points";
+    pub const TRUTH_SCAN: &str = "/truth/scan";
+    pub const TRUTH_EVENTS: &str = "/truth/events";
+}
+
+/// Seconds from the start of the drive to a ROS stamp, ns.
+pub fn stamp_ns(t_s: f64) -> i64 {
+    START_NS + (t_s * 1e9).round() as i64
+}
+
+struct Channels {
+    lidar: u16,
+    imu: u16,
+    twist: u16,
+    odometry: u16,
+    tf_static: u16,
+    truth_points: u16,
+    truth_scan: u16,
+    truth_events: u16,
+}
+
+/// The writer side of a synthetic drive.
+pub struct SynthLog<'w> {
+    writer: &'w mut OutputWriter,
+    channels: Channels,
+    sequences: std::collections::BTreeMap<u16, u32>,
+    messages: u64,
+    /// Motion messages are generated up to here (exclusive), seconds.
+    motion_until_s: f64,
+    imu_index: u64,
+    velocity_index: u64,
+}
+
+fn ros_channel(topic: &str, package: &str, type_name: &str, definition: String) -> OwnChannelSpec {
+    let dialect = RosDialect::Ros2;
+    OwnChannelSpec {
+        topic: topic.into(),
+        schema_name: dialect.schema_name(package, type_name),
+        schema_encoding: dialect.schema_encoding().into(),
+        schema_data: definition.into_bytes(),
+        message_encoding: dialect.message_encoding().into(),
+    }
+}
+
+fn json_channel(topic: &str, schema_name: &str, schema: &str) -> OwnChannelSpec {
+    OwnChannelSpec {
+        topic: topic.into(),
+        schema_name: schema_name.into(),
+        schema_encoding: "jsonschema".into(),
+        schema_data: schema.as_bytes().to_vec(),
+        message_encoding: "json".into(),
+    }
+}
+
+impl<'w> SynthLog<'w> {
+    /// Register the channels and write `/tf_static`; messages start with scan `first_scan`.
+    pub fn new(
+        writer: &'w mut OutputWriter,
+        world: &World,
+        first_scan: u64,
+    ) -> Result<Self, OutputError> {
+        let d = RosDialect::Ros2;
+        let mut add = |spec: OwnChannelSpec| writer.add_own_channel(&spec);
+        let channels = Channels {
+            lidar: add(ros_channel(
+                topics::LIDAR,
+                "sensor_msgs",
+                "PointCloud2",
+                ros_schemas::point_cloud2(d),
+            ))?,
+            imu: add(ros_channel(
+                topics::IMU,
+                "sensor_msgs",
+                "Imu",
+                ros_schemas::imu(d),
+            ))?,
+            twist: add(ros_channel(
+                topics::TWIST,
+                "geometry_msgs",
+                "TwistStamped",
+                ros_schemas::twist_stamped(d),
+            ))?,
+            odometry: add(ros_channel(
+                topics::ODOMETRY,
+                "nav_msgs",
+                "Odometry",
+                ros_schemas::odometry(d),
+            ))?,
+            tf_static: add(ros_channel(
+                topics::TF_STATIC,
+                "tf2_msgs",
+                "TFMessage",
+                ros_schemas::tf_message(d),
+            ))?,
+            truth_points: add(ros_channel(
+                topics::TRUTH_POINTS,
+                "sensor_msgs",
+                "PointCloud2",
+                ros_schemas::point_cloud2(d),
+            ))?,
+            truth_scan: add(json_channel(
+                topics::TRUTH_SCAN,
+                "looming.TruthScan",
+                include_str!("../../schemas/looming.TruthScan.schema.json"),
+            ))?,
+            truth_events: add(json_channel(
+                topics::TRUTH_EVENTS,
+                "looming.TruthEvent",
+                include_str!("../../schemas/looming.TruthEvent.schema.json"),
+            ))?,
+        };
+        let start_s = first_scan as f64 * world.period_s;
+        let first_index = |rate_hz: f64| (start_s * rate_hz - 1e-9).ceil().max(0.0) as u64;
+        let mut log = Self {
+            writer,
+            channels,
+            sequences: Default::default(),
+            messages: 0,
+            motion_until_s: start_s,
+            imu_index: first_index(world.scenario.imu.rate_hz),
+            velocity_index: first_index(world.scenario.velocity_rate_hz),
+        };
+        let tf = tf_static(world, start_s);
+        log.write(
+            log.channels.tf_static,
+            stamp_ns(start_s),
+            &tf.encode_cdr(false),
+        )?;
+        Ok(log)
+    }
+
+    pub fn messages_written(&self) -> u64 {
+        self.messages
+    }
+
+    fn write(&mut self, channel: u16, log_time_ns: i64, data: &[u8]) -> Result<(), OutputError> {
+        let sequence = self.sequences.entry(channel).or_default();
+        *sequence += 1;
+        self.messages += 1;
+        self.writer
+            .write_own_message(channel, *sequence, log_time_ns.max(0) as u64, data)
+    }
+
+    /// The resolved scenario and the seed, for reproduction.
+    pub fn write_metadata(
+        &mut self,
+        scenario: &Scenario,
+        seed: u64,
+        start_s: f64,
+    ) -> Result<(), OutputError> {
+        let mut metadata = std::collections::BTreeMap::new();
+        metadata.insert("tool".into(), "looming synth".into());
+        metadata.insert("version".into(), env!("CARGO_PKG_VERSION").into());
+        metadata.insert("seed".into(), seed.to_string());
+        metadata.insert("start_s".into(), start_s.to_string());
+        metadata.insert(
+            "scenario".into(),
+            serde_json::to_string(scenario).expect("scenarios serialise"),
+        );
+        self.writer.write_metadata(&mcap::records::Metadata {
+            name: "looming.synth".into(),
+            metadata,
+        })
+    }
+
+    /// Motion messages stamped before the end of `scan`'s sweep, then the scan
+    /// and its truth, published when the sweep ends.
+    pub fn write_interval(
+        &mut self,
+        world: &World,
+        scan: &SimScan,
+        seed: u64,
+    ) -> Result<(), OutputError> {
+        let sweep_end_s = scan.stamp_s + world.period_s;
+        self.write_motion_until(world, sweep_end_s, seed)?;
+        let log_time_ns = stamp_ns(sweep_end_s);
+        let cloud = lidar_cloud(scan);
+        self.write(self.channels.lidar, log_time_ns, &cloud.encode_cdr(false))?;
+        let truth_cloud = truth_cloud(scan);
+        self.write(
+            self.channels.truth_points,
+            log_time_ns,
+            &truth_cloud.encode_cdr(false),
+        )?;
+        let truth = serde_json::to_vec(&TruthScan::new(world, scan)).expect("truth serialises");
+        self.write(self.channels.truth_scan, log_time_ns, &truth)
+    }
+
+    /// IMU, twist and odometry messages with stamps in [motion_until_s, until_s).
+    fn write_motion_until(
+        &mut self,
+        world: &World,
+        until_s: f64,
+        seed: u64,
+    ) -> Result<(), OutputError> {
+        let imu_period_s = 1.0 / world.scenario.imu.rate_hz;
+        let velocity_period_s = 1.0 / world.scenario.velocity_rate_hz;
+        loop {
+            let next_imu_s = self.imu_index as f64 * imu_period_s;
+            let next_velocity_s = self.velocity_index as f64 * velocity_period_s;
+            let next_s = next_imu_s.min(next_velocity_s);
+            if next_s >= until_s - 1e-12 {
+                break;
+            }
+            if next_imu_s <= next_velocity_s {
+                let imu = imu_message(world, next_imu_s, self.imu_index, seed);
+                self.write(
+                    self.channels.imu,
+                    stamp_ns(next_imu_s),
+                    &imu.encode_cdr(false),
+                )?;
+                self.imu_index += 1;
+            } else {
+                let (twist, odometry) = velocity_messages(world, next_velocity_s);
+                self.write(
+                    self.channels.twist,
+                    stamp_ns(next_velocity_s),
+                    &twist.encode_cdr(false),
+                )?;
+                self.write(
+                    self.channels.odometry,
+                    stamp_ns(next_velocity_s),
+                    &odometry.encode_cdr(false),
+                )?;
+                self.velocity_index += 1;
+            }
+        }
+        self.motion_until_s = until_s;
+        Ok(())
+    }
+
+    pub fn write_events(&mut self, events: &[TruthEvent]) -> Result<(), OutputError> {
+        for event in events {
+            let data = serde_json::to_vec(event).expect("events serialise");
+            self.write(self.channels.truth_events, event.start_ns, &data)?;
+        }
+        Ok(())
+    }
+}
+
+fn lidar_cloud(scan: &SimScan) -> PointCloud2<'static> {
+    let points: Vec<[f32; 3]> = scan.points.iter().map(|p| p.point_m).collect();
+    let intensity: Vec<f32> = scan.points.iter().map(|p| p.intensity).collect();
+    let ring: Vec<u16> = scan.points.iter().map(|p| p.ring).collect();
+    let time: Vec<f32> = scan.points.iter().map(|p| p.time_s).collect();
+    pointcloud2_from_points(
+        stamp_ns(scan.stamp_s),
+        LIDAR_FRAME,
+        &points,
+        Some(&intensity),
+        Some(&ring),
+        Some(&time),
+    )
+}
+
+/// Field layout of `/truth/points` (one point per `/lidar/points` point, same order).
+const TRUTH_POINT_STEP: u32 = 24;
+
+fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
+    // No x, y, z: the noise-free point is `range` along the measured point's
+    // direction, and leaving them out keeps the sample logs small.
+    let fields = vec![
+        PointField::new("range", 0, datatype::FLOAT32),
+        PointField::new("point_looming", 4, datatype::FLOAT32),
+        PointField::new("ray_looming", 8, datatype::FLOAT32),
+        PointField::new("incidence_cos", 12, datatype::FLOAT32),
+        PointField::new("object_id", 16, datatype::UINT32),
+        PointField::new("surface", 20, datatype::UINT8),
+        PointField::new("moving", 21, datatype::UINT8),
+    ];
+    let mut data = Vec::with_capacity(scan.points.len() * TRUTH_POINT_STEP as usize);
+    for point in &scan.points {
+        let truth = &point.truth;
+        data.extend_from_slice(&(truth.range_m as f32).to_le_bytes());
+        data.extend_from_slice(&(truth.point_looming_per_s as f32).to_le_bytes());
+        data.extend_from_slice(&(truth.ray_looming_per_s as f32).to_le_bytes());
+        data.extend_from_slice(&(truth.incidence_cos as f32).to_le_bytes());
+        data.extend_from_slice(&truth.object_id.to_le_bytes());
+        data.push(truth.surface as u8);
+        data.push(u8::from(truth.moving));
+        data.extend_from_slice(&[0, 0]);
+    }
+    let width = scan.points.len() as u32;
+    PointCloud2 {
+        header: Header::new(stamp_ns(scan.stamp_s), LIDAR_FRAME),
+        height: 1,
+        width,
+        fields,
+        is_bigendian: false,
+        point_step: TRUTH_POINT_STEP,
+        row_step: width * TRUTH_POINT_STEP,
+        data: data.into(),
+        is_dense: true,
+    }
+}
+
+fn ros_vector(v: &Vector3<f64>) -> RosVector3 {
+    RosVector3::new(v.x, v.y, v.z)
+}
+
+fn ros_quaternion(q: &UnitQuaternion<f64>) -> Quaternion {
+    Quaternion {
+        x: q.i,
+        y: q.j,
+        z: q.k,
+        w: q.w,
+    }
+}
+
+/// `/imu/data` at `t_s`: gyro and specific force in the vehicle frame, with
+/// seeded Gaussian noise (a generator per sample index: order independent).
+fn imu_message(world: &World, t_s: f64, index: u64, seed: u64) -> Imu {
+    let ego = world.track.state(t_s);
+    let (mut force, mut gyro) = ego.imu_reading();
+    let spec = &world.scenario.imu;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+        seed ^ 0x1A2B_3C4D ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03),
+    );
+    if let (Ok(gyro_noise), Ok(accel_noise)) = (
+        Normal::new(0.0, spec.gyro_noise_radps.max(0.0)),
+        Normal::new(0.0, spec.accel_noise_mps2.max(0.0)),
+    ) {
+        for c in gyro.iter_mut() {
+            *c += gyro_noise.sample(&mut rng);
+        }
+        for c in force.iter_mut() {
+            *c += accel_noise.sample(&mut rng);
+        }
+    }
+    let orientation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), ego.yaw_rad);
+    let diagonal = |v: f64| [v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v];
+    Imu {
+        header: Header::new(stamp_ns(t_s), VEHICLE_FRAME),
+        orientation: ros_quaternion(&orientation),
+        orientation_covariance: diagonal(1e-4),
+        angular_velocity: ros_vector(&gyro),
+        angular_velocity_covariance: diagonal(spec.gyro_noise_radps.powi(2)),
+        linear_acceleration: ros_vector(&force),
+        linear_acceleration_covariance: diagonal(spec.accel_noise_mps2.powi(2)),
+    }
+}
+
+/// `/vehicle/twist` and `/odom` at `t_s`, exact, in the vehicle frame.
+fn velocity_messages(world: &World, t_s: f64) -> (TwistStamped, Odometry) {
+    let ego = world.track.state(t_s);
+    let twist = Twist {
+        linear: RosVector3::new(ego.speed_mps, 0.0, 0.0),
+        angular: RosVector3::new(0.0, 0.0, ego.yaw_rate_radps),
+    };
+    let orientation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), ego.yaw_rad);
+    let odometry = Odometry {
+        header: Header::new(stamp_ns(t_s), ODOM_FRAME),
+        child_frame_id: VEHICLE_FRAME.into(),
+        pose: PoseWithCovariance {
+            pose: Pose {
+                position: ros_vector(&ego.position_m),
+                orientation: ros_quaternion(&orientation),
+            },
+            covariance: [0.0; 36],
+        },
+        twist: TwistWithCovariance {
+            twist,
+            covariance: [0.0; 36],
+        },
+    };
+    (
+        TwistStamped {
+            header: Header::new(stamp_ns(t_s), VEHICLE_FRAME),
+            twist,
+        },
+        odometry,
+    )
+}
+
+/// `/tf_static`: the LiDAR mount in the vehicle/IMU frame.
+fn tf_static(world: &World, start_s: f64) -> TFMessage {
+    let mount = &world.vehicle_from_lidar;
+    TFMessage {
+        transforms: vec![TransformStamped {
+            header: Header::new(stamp_ns(start_s), VEHICLE_FRAME),
+            child_frame_id: LIDAR_FRAME.into(),
+            transform: Transform {
+                translation: ros_vector(&mount.translation.vector),
+                rotation: ros_quaternion(&mount.rotation),
+            },
+        }],
+    }
+}

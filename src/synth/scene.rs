@@ -1,0 +1,444 @@
+//! Scenario files: the scene (road, buildings, obstacles, moving actors), the
+//! ego trajectory and the sensors, as JSON (serde, unknown fields refused,
+//! everything optional has a default). The built-in scenarios are JSON files
+//! embedded in the binary (`src/synth/scenarios/`), so they double as examples.
+
+use serde::{Deserialize, Serialize};
+
+/// A whole scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Length of the drive, seconds.
+    #[serde(default = "defaults::duration_s")]
+    pub duration_s: f64,
+    /// Height of the road plane (world z), metres.
+    #[serde(default)]
+    pub ground_height_m: f64,
+    pub ego: EgoSpec,
+    /// Buildings, walls, parked cars, poles: never move.
+    #[serde(default)]
+    pub static_objects: Vec<StaticObject>,
+    /// Moving boxes (cars, pedestrians), each with its own id (> 0).
+    #[serde(default)]
+    pub actors: Vec<Actor>,
+    #[serde(default)]
+    pub lidar: LidarSpec,
+    #[serde(default)]
+    pub imu: ImuSpec,
+    /// Rate of the TwistStamped and Odometry messages, Hz.
+    #[serde(default = "defaults::velocity_rate_hz")]
+    pub velocity_rate_hz: f64,
+    /// How planted near misses are timed from the truth (see docs/ground-truth.md).
+    #[serde(default)]
+    pub events: EventSpec,
+}
+
+/// A piecewise-linear profile: `[time_s, value]` knots, held constant before the
+/// first and after the last.
+pub type Profile = Vec<[f64; 2]>;
+
+/// The ego vehicle: start pose and speed / yaw-rate profiles. The vehicle frame
+/// (`imu_link`) is x forward, y left, z up, `imu_height_m` above the road.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EgoSpec {
+    #[serde(default)]
+    pub start_xy_m: [f64; 2],
+    #[serde(default)]
+    pub start_yaw_deg: f64,
+    /// Speed profile, m/s.
+    pub speed_mps: Profile,
+    /// Yaw-rate profile, degrees per second (positive = turning left).
+    #[serde(default)]
+    pub yaw_rate_dps: Profile,
+    #[serde(default = "defaults::imu_height_m")]
+    pub imu_height_m: f64,
+}
+
+/// Something that never moves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum StaticObject {
+    /// A box standing on the road: centre (x, y) on the ground, size (length
+    /// along its x, width, height), yaw.
+    Box {
+        #[serde(default)]
+        label: String,
+        center_xy_m: [f64; 2],
+        size_m: [f64; 3],
+        #[serde(default)]
+        yaw_deg: f64,
+    },
+    /// A parked car: a 4.5 x 1.8 x 1.5 m box.
+    Car {
+        #[serde(default)]
+        label: String,
+        center_xy_m: [f64; 2],
+        #[serde(default)]
+        yaw_deg: f64,
+    },
+    /// A pole: vertical cylinder.
+    Pole {
+        #[serde(default)]
+        label: String,
+        center_xy_m: [f64; 2],
+        #[serde(default = "defaults::pole_radius_m")]
+        radius_m: f64,
+        #[serde(default = "defaults::pole_height_m")]
+        height_m: f64,
+    },
+}
+
+/// A moving box. Its motion is either a constant velocity from a start point, or
+/// a piecewise-linear trajectory of `[time_s, x_m, y_m]` waypoints (held at the
+/// ends). It translates only (its yaw is fixed).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Actor {
+    /// Reported as the object id of its points (> 0).
+    pub id: u32,
+    #[serde(default)]
+    pub label: String,
+    /// Length, width, height, metres.
+    #[serde(default = "defaults::car_size_m")]
+    pub size_m: [f64; 3],
+    #[serde(default)]
+    pub yaw_deg: f64,
+    #[serde(default)]
+    pub start_xy_m: Option<[f64; 2]>,
+    #[serde(default)]
+    pub velocity_mps: Option<[f64; 2]>,
+    #[serde(default)]
+    pub trajectory: Option<Vec<[f64; 3]>>,
+    /// This actor is a planted near miss: its event window is written to
+    /// `/truth/events`.
+    #[serde(default)]
+    pub planted_near_miss: bool,
+}
+
+/// The spinning LiDAR.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LidarSpec {
+    pub beams: u16,
+    /// Beam elevations evenly spaced from `elevation_max_deg` down to `elevation_min_deg`.
+    pub elevation_max_deg: f64,
+    pub elevation_min_deg: f64,
+    pub columns: u32,
+    pub rate_hz: f64,
+    pub max_range_m: f64,
+    pub range_noise_m: f64,
+    /// Pose of the LiDAR in the vehicle/IMU frame: translation (lever arm) and
+    /// roll, pitch, yaw (degrees, applied as yaw * pitch * roll).
+    pub mount_xyz_m: [f64; 3],
+    pub mount_rpy_deg: [f64; 3],
+}
+
+impl Default for LidarSpec {
+    fn default() -> Self {
+        Self {
+            beams: 64,
+            elevation_max_deg: 2.0,
+            elevation_min_deg: -24.8,
+            columns: 2048,
+            rate_hz: 10.0,
+            max_range_m: 120.0,
+            range_noise_m: 0.02,
+            // About a metre ahead of and above the IMU, yawed and pitched a little,
+            // so the extrinsic and lever-arm path is exercised.
+            mount_xyz_m: [0.8, 0.1, 0.9],
+            mount_rpy_deg: [0.0, -1.5, 4.0],
+        }
+    }
+}
+
+/// The IMU (also the vehicle frame).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuSpec {
+    pub rate_hz: f64,
+    pub gyro_noise_radps: f64,
+    pub accel_noise_mps2: f64,
+}
+
+impl Default for ImuSpec {
+    fn default() -> Self {
+        Self {
+            rate_hz: 100.0,
+            gyro_noise_radps: 0.002,
+            accel_noise_mps2: 0.05,
+        }
+    }
+}
+
+/// How planted near-miss windows are measured from the truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EventSpec {
+    /// Time to contact below which an actor's points count as threatening, s.
+    pub ttc_threshold_s: f64,
+    /// Threatening points of the actor needed in a scan.
+    pub min_points: usize,
+}
+
+impl Default for EventSpec {
+    fn default() -> Self {
+        Self {
+            ttc_threshold_s: 1.5,
+            min_points: 10,
+        }
+    }
+}
+
+mod defaults {
+    pub fn duration_s() -> f64 {
+        10.0
+    }
+    pub fn velocity_rate_hz() -> f64 {
+        50.0
+    }
+    pub fn imu_height_m() -> f64 {
+        0.83
+    }
+    pub fn pole_radius_m() -> f64 {
+        0.12
+    }
+    pub fn pole_height_m() -> f64 {
+        5.0
+    }
+    pub fn car_size_m() -> [f64; 3] {
+        [4.5, 1.8, 1.5]
+    }
+}
+
+/// Errors in a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("unknown scenario `{name}`; built-in scenarios: {known}")]
+    Unknown { name: String, known: String },
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Parse {
+        path: String,
+        source: serde_json::Error,
+    },
+    #[error("{name}: {what}")]
+    Invalid { name: String, what: String },
+}
+
+/// Built-in scenarios: name and JSON text.
+pub const BUILT_IN: &[(&str, &str)] = &[
+    (
+        "straight-road",
+        include_str!("scenarios/straight-road.json"),
+    ),
+    ("urban-turn", include_str!("scenarios/urban-turn.json")),
+    ("follow", include_str!("scenarios/follow.json")),
+    ("cut-in", include_str!("scenarios/cut-in.json")),
+    ("crossing", include_str!("scenarios/crossing.json")),
+    ("safe-drive", include_str!("scenarios/safe-drive.json")),
+];
+
+/// Load a built-in scenario by name, or a JSON file by path.
+pub fn load(name_or_path: &str) -> Result<Scenario, ScenarioError> {
+    if let Some((_, text)) = BUILT_IN.iter().find(|(name, _)| *name == name_or_path) {
+        return parse(name_or_path, text);
+    }
+    let path = std::path::Path::new(name_or_path);
+    if path.extension().is_some_and(|e| e == "json") || path.exists() {
+        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
+            path: name_or_path.into(),
+            source,
+        })?;
+        return parse(name_or_path, &text);
+    }
+    Err(ScenarioError::Unknown {
+        name: name_or_path.into(),
+        known: BUILT_IN
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", "),
+    })
+}
+
+fn parse(origin: &str, text: &str) -> Result<Scenario, ScenarioError> {
+    let scenario: Scenario = serde_json::from_str(text).map_err(|source| ScenarioError::Parse {
+        path: origin.into(),
+        source,
+    })?;
+    scenario.validate()?;
+    Ok(scenario)
+}
+
+impl Scenario {
+    /// Check what serde cannot: positive sizes and rates, actor motion given once.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        let invalid = |what: String| ScenarioError::Invalid {
+            name: self.name.clone(),
+            what,
+        };
+        let positive = |value: f64, what: &str| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(format!(
+                    "{what} must be a positive number, got {value}"
+                )))
+            }
+        };
+        positive(self.duration_s, "duration_s")?;
+        positive(self.lidar.rate_hz, "lidar.rate_hz")?;
+        positive(self.lidar.max_range_m, "lidar.max_range_m")?;
+        positive(self.imu.rate_hz, "imu.rate_hz")?;
+        positive(self.velocity_rate_hz, "velocity_rate_hz")?;
+        if self.lidar.beams < 1 || self.lidar.columns < 8 {
+            return Err(invalid("lidar needs at least 1 beam and 8 columns".into()));
+        }
+        if self.lidar.elevation_min_deg >= self.lidar.elevation_max_deg && self.lidar.beams > 1 {
+            return Err(invalid(
+                "lidar.elevation_min_deg must be below elevation_max_deg".into(),
+            ));
+        }
+        if self.ego.speed_mps.is_empty() {
+            return Err(invalid(
+                "ego.speed_mps needs at least one [time_s, value] knot".into(),
+            ));
+        }
+        check_profile(&self.ego.speed_mps).map_err(|e| invalid(format!("ego.speed_mps: {e}")))?;
+        check_profile(&self.ego.yaw_rate_dps)
+            .map_err(|e| invalid(format!("ego.yaw_rate_dps: {e}")))?;
+        let mut ids = std::collections::BTreeSet::new();
+        for actor in &self.actors {
+            if actor.id == 0 || !ids.insert(actor.id) {
+                return Err(invalid(format!(
+                    "actor ids must be unique and > 0 (id {})",
+                    actor.id
+                )));
+            }
+            let by_velocity = actor.start_xy_m.is_some() || actor.velocity_mps.is_some();
+            match (&actor.trajectory, by_velocity) {
+                (Some(points), false) if !points.is_empty() => {
+                    if points.windows(2).any(|w| w[1][0] <= w[0][0]) {
+                        return Err(invalid(format!(
+                            "actor {}: trajectory times must increase",
+                            actor.id
+                        )));
+                    }
+                }
+                (None, true) if actor.start_xy_m.is_some() => {}
+                _ => {
+                    return Err(invalid(format!(
+                        "actor {}: give either start_xy_m (+ velocity_mps) or a non-empty trajectory",
+                        actor.id
+                    )));
+                }
+            }
+            if actor.size_m.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                return Err(invalid(format!(
+                    "actor {}: sizes must be positive",
+                    actor.id
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_profile(profile: &Profile) -> Result<(), String> {
+    if profile
+        .iter()
+        .any(|[t, v]| !t.is_finite() || !v.is_finite())
+    {
+        return Err("knots must be finite numbers".into());
+    }
+    if profile.windows(2).any(|w| w[1][0] <= w[0][0]) {
+        return Err("knot times must increase".into());
+    }
+    Ok(())
+}
+
+/// Value of a piecewise-linear profile at `t_s` (0 for an empty profile).
+pub fn profile_at(profile: &Profile, t_s: f64) -> f64 {
+    let Some(first) = profile.first() else {
+        return 0.0;
+    };
+    if t_s <= first[0] {
+        return first[1];
+    }
+    for w in profile.windows(2) {
+        let ([t0, v0], [t1, v1]) = (w[0], w[1]);
+        if t_s <= t1 {
+            return v0 + (v1 - v0) * (t_s - t0) / (t1 - t0);
+        }
+    }
+    profile.last().map_or(0.0, |last| last[1])
+}
+
+/// Slope of a piecewise-linear profile at `t_s` (right derivative at knots).
+pub fn profile_slope_at(profile: &Profile, t_s: f64) -> f64 {
+    for w in profile.windows(2) {
+        let ([t0, v0], [t1, v1]) = (w[0], w[1]);
+        if t_s >= t0 && t_s < t1 {
+            return (v1 - v0) / (t1 - t0);
+        }
+    }
+    0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_built_in_scenario_parses_and_validates() {
+        for (name, _) in BUILT_IN {
+            let scenario = load(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(&scenario.name, name);
+        }
+    }
+
+    #[test]
+    fn unknown_fields_and_names_are_refused() {
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}, "colour": "red"}"#;
+        assert!(matches!(parse("x", text), Err(ScenarioError::Parse { .. })));
+        let err = load("no-such-scenario").unwrap_err().to_string();
+        assert!(err.contains("straight-road"), "{err}");
+    }
+
+    #[test]
+    fn defaults_fill_what_is_not_given() {
+        let scenario = parse("x", r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}}"#).unwrap();
+        assert_eq!(scenario.lidar.beams, 64);
+        assert_eq!(scenario.lidar.elevation_min_deg, -24.8);
+        assert_eq!(scenario.imu.rate_hz, 100.0);
+        assert_eq!(scenario.velocity_rate_hz, 50.0);
+    }
+
+    #[test]
+    fn profiles_interpolate_and_hold() {
+        let profile = vec![[1.0, 10.0], [3.0, 20.0]];
+        assert_eq!(profile_at(&profile, 0.0), 10.0);
+        assert_eq!(profile_at(&profile, 2.0), 15.0);
+        assert_eq!(profile_at(&profile, 5.0), 20.0);
+        assert_eq!(profile_slope_at(&profile, 2.0), 5.0);
+        assert_eq!(profile_slope_at(&profile, 4.0), 0.0);
+    }
+
+    #[test]
+    fn bad_actor_motion_is_refused() {
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}, "actors": [{"id": 1}]}"#;
+        assert!(matches!(
+            parse("x", text),
+            Err(ScenarioError::Invalid { .. })
+        ));
+    }
+}

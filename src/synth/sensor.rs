@@ -1,0 +1,364 @@
+//! The simulated spinning LiDAR and its ground truth: a rolling sweep in which
+//! every column is fired at its own time while the ego and the actors move.
+//! Pure math, no I/O; deterministic (rayon over columns, results in order,
+//! noise drawn sequentially from a per-scan seeded generator).
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
+
+use super::geometry::{Hit, Ray, SceneObject, SceneSnapshot, Shape};
+use super::kinematics::{EgoTrack, LidarState, actor_motion, vehicle_from_lidar};
+use super::scene::{Actor, Scenario, StaticObject};
+
+/// Parked-car box size, metres.
+const CAR_SIZE_M: [f64; 3] = [4.5, 1.8, 1.5];
+
+/// One simulated point with its truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimPoint {
+    /// Measured point (range noise included), LiDAR frame, metres.
+    pub point_m: [f32; 3],
+    pub intensity: f32,
+    /// Beam index, 0 = lowest beam (as Velodyne drivers number rings).
+    pub ring: u16,
+    /// Firing time from the scan stamp, seconds.
+    pub time_s: f32,
+    pub truth: PointTruth,
+}
+
+/// Ground truth of one point (definitions in docs/ground-truth.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointTruth {
+    /// Noise-free hit point, LiDAR frame at the firing time, metres.
+    pub point_m: [f64; 3],
+    pub range_m: f64,
+    /// `(v_rel . p) / (p . p)`: v_rel the LiDAR's velocity relative to the hit
+    /// object, LiDAR frame. 1/s.
+    pub point_looming_per_s: f64,
+    /// `-(dR/dt)/R` along the ray, its direction held fixed in a non-rotating
+    /// frame (what a rotation-compensated range difference measures). 1/s.
+    pub ray_looming_per_s: f64,
+    /// `|n . d|`: cosine of the angle between the ray and the surface normal
+    /// (1 = the surface faces the ray, 0 = grazing).
+    pub incidence_cos: f64,
+    /// 0 for the static world, the actor id otherwise.
+    pub object_id: u32,
+    pub surface: Surface,
+    pub moving: bool,
+}
+
+/// What kind of surface a point is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Surface {
+    Road = 0,
+    /// Buildings, walls, poles, parked cars.
+    StaticObject = 1,
+    Actor = 2,
+}
+
+/// One simulated scan.
+#[derive(Debug, Clone)]
+pub struct SimScan {
+    pub index: u64,
+    /// Scan start, seconds from the start of the drive.
+    pub stamp_s: f64,
+    /// Points in firing order (column by column, lowest beam first).
+    pub points: Vec<SimPoint>,
+}
+
+/// The simulated world: scene, ego track, sensor.
+pub struct World {
+    pub scenario: Scenario,
+    pub track: EgoTrack,
+    pub vehicle_from_lidar: Isometry3<f64>,
+    static_scene: SceneSnapshot,
+    /// Beam elevations, ring order (lowest first), radians.
+    pub elevations_rad: Vec<f64>,
+    pub period_s: f64,
+}
+
+impl World {
+    pub fn new(scenario: Scenario) -> Self {
+        let track = EgoTrack::new(&scenario.ego, scenario.duration_s + 1.0);
+        let lidar = &scenario.lidar;
+        let vehicle_from_lidar = vehicle_from_lidar(lidar.mount_xyz_m, lidar.mount_rpy_deg);
+        let elevations_rad = beam_elevations_rad(
+            lidar.beams,
+            lidar.elevation_min_deg,
+            lidar.elevation_max_deg,
+        );
+        let period_s = 1.0 / lidar.rate_hz;
+        let static_scene = SceneSnapshot::new(static_objects(&scenario));
+        Self {
+            scenario,
+            track,
+            vehicle_from_lidar,
+            static_scene,
+            elevations_rad,
+            period_s,
+        }
+    }
+
+    /// Number of whole scans in the drive.
+    pub fn scan_count(&self) -> u64 {
+        (self.scenario.duration_s / self.period_s + 1e-9).floor() as u64
+    }
+
+    /// The first scan starting at or after `start_s`.
+    pub fn first_scan_at(&self, start_s: f64) -> u64 {
+        (start_s / self.period_s - 1e-9).ceil().max(0.0) as u64
+    }
+
+    pub fn lidar_state(&self, t_s: f64) -> LidarState {
+        LidarState::new(&self.track.state(t_s), &self.vehicle_from_lidar)
+    }
+
+    /// The actors at `t_s`.
+    pub fn actor_scene(&self, t_s: f64) -> SceneSnapshot {
+        let ground = self.scenario.ground_height_m;
+        SceneSnapshot::new(
+            self.scenario
+                .actors
+                .iter()
+                .map(|a| actor_object(a, t_s, ground))
+                .collect(),
+        )
+    }
+
+    /// Velocity of an object (0 = static world), world frame.
+    pub fn object_velocity_world_mps(&self, object_id: u32, t_s: f64) -> Vector3<f64> {
+        self.scenario
+            .actors
+            .iter()
+            .find(|a| a.id == object_id)
+            .map_or(Vector3::zeros(), |actor| {
+                let (_, [vx, vy]) = actor_motion(actor, t_s);
+                Vector3::new(vx, vy, 0.0)
+            })
+    }
+
+    /// The nearest hit of a world ray (static scene and `actors`), with the
+    /// kind of surface hit.
+    pub fn cast(&self, ray: &Ray, actors: &SceneSnapshot) -> Option<(Hit, Surface)> {
+        let max_range_m = self.scenario.lidar.max_range_m;
+        let fixed = self.static_scene.cast(ray, max_range_m).map(|hit| {
+            // The road is object 0 of the static scene.
+            let surface = if hit.object_index == 0 {
+                Surface::Road
+            } else {
+                Surface::StaticObject
+            };
+            (hit, surface)
+        });
+        let moving = actors
+            .cast(ray, max_range_m)
+            .map(|hit| (hit, Surface::Actor));
+        match (fixed, moving) {
+            (Some(a), Some(b)) => Some(if b.0.range_m < a.0.range_m { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Direction of beam `ring` at `column`, LiDAR frame. Columns sweep clockwise
+    /// seen from above, starting behind the sensor, as Velodyne sensors turn.
+    pub fn beam_direction(&self, ring: usize, column: u32) -> Vector3<f64> {
+        let azimuth = std::f64::consts::PI
+            - std::f64::consts::TAU * f64::from(column) / f64::from(self.scenario.lidar.columns);
+        let elevation = self.elevations_rad[ring];
+        Vector3::new(
+            elevation.cos() * azimuth.cos(),
+            elevation.cos() * azimuth.sin(),
+            elevation.sin(),
+        )
+    }
+
+    /// Firing time of `column` from the scan stamp, seconds.
+    pub fn column_time_s(&self, column: u32) -> f64 {
+        self.period_s * f64::from(column) / f64::from(self.scenario.lidar.columns)
+    }
+
+    /// Simulate scan `index` with noise from `seed`.
+    pub fn scan(&self, index: u64, seed: u64) -> SimScan {
+        let stamp_s = index as f64 * self.period_s;
+        let columns: Vec<Vec<SimPoint>> = (0..self.scenario.lidar.columns)
+            .into_par_iter()
+            .map(|column| self.fire_column(stamp_s, column))
+            .collect();
+        let mut points: Vec<SimPoint> = columns.into_iter().flatten().collect();
+        self.add_range_noise(&mut points, index, seed);
+        SimScan {
+            index,
+            stamp_s,
+            points,
+        }
+    }
+
+    fn fire_column(&self, stamp_s: f64, column: u32) -> Vec<SimPoint> {
+        let time_s = self.column_time_s(column);
+        let t_s = stamp_s + time_s;
+        let lidar = self.lidar_state(t_s);
+        let actors = self.actor_scene(t_s);
+        let origin = lidar.origin();
+        let mut points = Vec::with_capacity(self.elevations_rad.len());
+        for ring in 0..self.elevations_rad.len() {
+            let direction_lidar = self.beam_direction(ring, column);
+            let direction_world = lidar.world_from_lidar.rotation * direction_lidar;
+            let ray = Ray {
+                origin,
+                direction: direction_world,
+            };
+            let Some((hit, surface)) = self.cast(&ray, &actors) else {
+                continue;
+            };
+            let truth = self.point_truth(
+                &lidar,
+                &direction_lidar,
+                &direction_world,
+                &hit,
+                surface,
+                t_s,
+            );
+            let intensity = intensity(&hit, &direction_world);
+            points.push(SimPoint {
+                point_m: truth.point_m.map(|c| c as f32),
+                intensity,
+                ring: ring as u16,
+                time_s: time_s as f32,
+                truth,
+            });
+        }
+        points
+    }
+
+    /// Truth of one hit. Ray looming: the range along a fixed (non-rotating)
+    /// direction `d` to the hit surface with normal `n` changes at
+    /// `dR/dt = -(n . v_rel) / (n . d)`, exactly at the instant (only the tangent
+    /// plane matters), so `L_ray = (n . v_rel) / ((n . d) R)`.
+    fn point_truth(
+        &self,
+        lidar: &LidarState,
+        direction_lidar: &Vector3<f64>,
+        direction_world: &Vector3<f64>,
+        hit: &Hit,
+        surface: Surface,
+        t_s: f64,
+    ) -> PointTruth {
+        let velocity_rel_world =
+            lidar.velocity_world_mps - self.object_velocity_world_mps(hit.object_id, t_s);
+        let point_lidar = direction_lidar * hit.range_m;
+        let velocity_rel_lidar = lidar.to_lidar(&velocity_rel_world);
+        let point_looming_per_s = velocity_rel_lidar.dot(&point_lidar) / point_lidar.norm_squared();
+        let ray_looming_per_s =
+            hit.normal.dot(&velocity_rel_world) / (hit.normal.dot(direction_world) * hit.range_m);
+        PointTruth {
+            point_m: [point_lidar.x, point_lidar.y, point_lidar.z],
+            range_m: hit.range_m,
+            point_looming_per_s,
+            ray_looming_per_s,
+            incidence_cos: hit.normal.dot(direction_world).abs(),
+            object_id: hit.object_id,
+            surface,
+            moving: hit.moving,
+        }
+    }
+
+    /// Gaussian range noise, drawn in point order from a generator seeded by
+    /// (seed, scan index): the same on any machine and thread count.
+    fn add_range_noise(&self, points: &mut [SimPoint], index: u64, seed: u64) {
+        let sigma_m = self.scenario.lidar.range_noise_m;
+        if sigma_m.is_nan() || sigma_m <= 0.0 {
+            return;
+        }
+        let Ok(normal) = Normal::new(0.0, sigma_m) else {
+            return;
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+            seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        for point in points {
+            let range_m = point.truth.range_m;
+            let noisy_m = (range_m + normal.sample(&mut rng)).max(1e-3);
+            let scale = noisy_m / range_m;
+            point.point_m = point.truth.point_m.map(|c| (c * scale) as f32);
+        }
+    }
+}
+
+/// Beam elevations evenly spaced, lowest first, radians.
+pub fn beam_elevations_rad(beams: u16, min_deg: f64, max_deg: f64) -> Vec<f64> {
+    if beams <= 1 {
+        return vec![max_deg.to_radians()];
+    }
+    let step = (max_deg - min_deg) / f64::from(beams - 1);
+    (0..beams)
+        .map(|b| (min_deg + step * f64::from(b)).to_radians())
+        .collect()
+}
+
+fn intensity(hit: &Hit, direction_world: &Vector3<f64>) -> f32 {
+    let facing = hit.normal.dot(direction_world).abs();
+    let base = if hit.moving { 150.0 } else { 40.0 };
+    (base + 60.0 * facing) as f32
+}
+
+/// The static world: road plane and every static object.
+fn static_objects(scenario: &Scenario) -> Vec<SceneObject> {
+    let ground = scenario.ground_height_m;
+    let mut objects = vec![SceneObject {
+        shape: Shape::Ground { height_m: ground },
+        object_id: 0,
+        moving: false,
+    }];
+    for object in &scenario.static_objects {
+        let shape = match object {
+            StaticObject::Box {
+                center_xy_m,
+                size_m,
+                yaw_deg,
+                ..
+            } => standing_box(*center_xy_m, *size_m, *yaw_deg, ground),
+            StaticObject::Car {
+                center_xy_m,
+                yaw_deg,
+                ..
+            } => standing_box(*center_xy_m, CAR_SIZE_M, *yaw_deg, ground),
+            StaticObject::Pole {
+                center_xy_m,
+                radius_m,
+                height_m,
+                ..
+            } => Shape::Cylinder {
+                base: Point3::new(center_xy_m[0], center_xy_m[1], ground),
+                radius_m: *radius_m,
+                height_m: *height_m,
+            },
+        };
+        objects.push(SceneObject {
+            shape,
+            object_id: 0,
+            moving: false,
+        });
+    }
+    objects
+}
+
+fn actor_object(actor: &Actor, t_s: f64, ground: f64) -> SceneObject {
+    let (position, _) = actor_motion(actor, t_s);
+    SceneObject {
+        shape: standing_box(position, actor.size_m, actor.yaw_deg, ground),
+        object_id: actor.id,
+        moving: true,
+    }
+}
+
+/// A box resting on the road.
+fn standing_box(center_xy_m: [f64; 2], size_m: [f64; 3], yaw_deg: f64, ground: f64) -> Shape {
+    Shape::Box {
+        center: Point3::new(center_xy_m[0], center_xy_m[1], ground + size_m[2] / 2.0),
+        half_extents_m: Vector3::new(size_m[0], size_m[1], size_m[2]) / 2.0,
+        yaw_rad: yaw_deg.to_radians(),
+    }
+}
