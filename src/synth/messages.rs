@@ -53,16 +53,81 @@ struct Channels {
     truth_events: u16,
 }
 
-/// The writer side of a synthetic drive.
-pub struct SynthLog<'w> {
-    writer: &'w mut OutputWriter,
+/// One encoded message for the writer.
+#[derive(Debug, Clone)]
+pub struct Encoded {
+    pub channel: u16,
+    pub log_time_ns: i64,
+    pub data: Vec<u8>,
+}
+
+/// Encodes a synthetic drive into messages, interval by interval. It does no
+/// I/O, so it can run on its own thread while [`SequencedWriter`] writes.
+pub struct SynthLog {
     channels: Channels,
-    sequences: std::collections::BTreeMap<u16, u32>,
-    messages: u64,
     /// Motion messages are generated up to here (exclusive), seconds.
     motion_until_s: f64,
     imu_index: u64,
     velocity_index: u64,
+    pending: Vec<Encoded>,
+}
+
+/// Writes encoded messages with per-channel sequence numbers.
+pub struct SequencedWriter<'w> {
+    writer: &'w mut OutputWriter,
+    sequences: std::collections::BTreeMap<u16, u32>,
+    messages: u64,
+}
+
+impl<'w> SequencedWriter<'w> {
+    pub fn new(writer: &'w mut OutputWriter) -> Self {
+        Self {
+            writer,
+            sequences: Default::default(),
+            messages: 0,
+        }
+    }
+
+    pub fn write_all(&mut self, messages: Vec<Encoded>) -> Result<(), OutputError> {
+        for message in messages {
+            let sequence = self.sequences.entry(message.channel).or_default();
+            *sequence += 1;
+            self.messages += 1;
+            self.writer.write_own_message(
+                message.channel,
+                *sequence,
+                message.log_time_ns.max(0) as u64,
+                &message.data,
+            )?;
+        }
+        Ok(())
+    }
+
+    pub fn messages_written(&self) -> u64 {
+        self.messages
+    }
+
+    /// The resolved scenario and the seed, for reproduction.
+    pub fn write_metadata(
+        &mut self,
+        scenario: &Scenario,
+        seed: u64,
+        start_s: f64,
+    ) -> Result<(), OutputError> {
+        let mut metadata = std::collections::BTreeMap::new();
+        metadata.insert("tool".into(), "looming synth".into());
+        metadata.insert("version".into(), env!("CARGO_PKG_VERSION").into());
+        metadata.insert("seed".into(), seed.to_string());
+        metadata.insert("start_s".into(), start_s.to_string());
+        metadata.insert(
+            "scenario".into(),
+            serde_json::to_string(scenario).expect("scenarios serialise"),
+        );
+        self.writer.write_metadata(&mcap::records::Metadata {
+            name: "looming.synth".into(),
+            metadata,
+        })
+    }
 }
 
 fn ros_channel(topic: &str, package: &str, type_name: &str, definition: String) -> OwnChannelSpec {
@@ -86,10 +151,10 @@ fn json_channel(topic: &str, schema_name: &str, schema: &str) -> OwnChannelSpec 
     }
 }
 
-impl<'w> SynthLog<'w> {
-    /// Register the channels and write `/tf_static`; messages start with scan `first_scan`.
+impl SynthLog {
+    /// Register the channels and queue `/tf_static`; messages start with scan `first_scan`.
     pub fn new(
-        writer: &'w mut OutputWriter,
+        writer: &mut OutputWriter,
         world: &World,
         first_scan: u64,
     ) -> Result<Self, OutputError> {
@@ -146,87 +211,56 @@ impl<'w> SynthLog<'w> {
         let start_s = first_scan as f64 * world.period_s;
         let first_index = |rate_hz: f64| (start_s * rate_hz - 1e-9).ceil().max(0.0) as u64;
         let mut log = Self {
-            writer,
             channels,
-            sequences: Default::default(),
-            messages: 0,
             motion_until_s: start_s,
             imu_index: first_index(world.scenario.imu.rate_hz),
             velocity_index: first_index(world.scenario.velocity_rate_hz),
+            pending: Vec::new(),
         };
         let tf = tf_static(world, start_s);
-        log.write(
+        log.push(
             log.channels.tf_static,
             stamp_ns(start_s),
-            &tf.encode_cdr(false),
-        )?;
+            tf.encode_cdr(false),
+        );
         Ok(log)
     }
 
-    pub fn messages_written(&self) -> u64 {
-        self.messages
+    fn push(&mut self, channel: u16, log_time_ns: i64, data: Vec<u8>) {
+        self.pending.push(Encoded {
+            channel,
+            log_time_ns,
+            data,
+        });
     }
 
-    fn write(&mut self, channel: u16, log_time_ns: i64, data: &[u8]) -> Result<(), OutputError> {
-        let sequence = self.sequences.entry(channel).or_default();
-        *sequence += 1;
-        self.messages += 1;
-        self.writer
-            .write_own_message(channel, *sequence, log_time_ns.max(0) as u64, data)
-    }
-
-    /// The resolved scenario and the seed, for reproduction.
-    pub fn write_metadata(
-        &mut self,
-        scenario: &Scenario,
-        seed: u64,
-        start_s: f64,
-    ) -> Result<(), OutputError> {
-        let mut metadata = std::collections::BTreeMap::new();
-        metadata.insert("tool".into(), "looming synth".into());
-        metadata.insert("version".into(), env!("CARGO_PKG_VERSION").into());
-        metadata.insert("seed".into(), seed.to_string());
-        metadata.insert("start_s".into(), start_s.to_string());
-        metadata.insert(
-            "scenario".into(),
-            serde_json::to_string(scenario).expect("scenarios serialise"),
-        );
-        self.writer.write_metadata(&mcap::records::Metadata {
-            name: "looming.synth".into(),
-            metadata,
-        })
+    /// Everything encoded since the last call, in log-time order.
+    pub fn take(&mut self) -> Vec<Encoded> {
+        std::mem::take(&mut self.pending)
     }
 
     /// Motion messages stamped before the end of `scan`'s sweep, then the scan
     /// and its truth, published when the sweep ends.
-    pub fn write_interval(
-        &mut self,
-        world: &World,
-        scan: &SimScan,
-        seed: u64,
-    ) -> Result<(), OutputError> {
+    pub fn encode_interval(&mut self, world: &World, scan: &SimScan, seed: u64) {
         let sweep_end_s = scan.stamp_s + world.period_s;
-        self.write_motion_until(world, sweep_end_s, seed)?;
+        self.encode_motion_until(world, sweep_end_s, seed);
         let log_time_ns = stamp_ns(sweep_end_s);
-        let cloud = lidar_cloud(scan);
-        self.write(self.channels.lidar, log_time_ns, &cloud.encode_cdr(false))?;
-        let truth_cloud = truth_cloud(scan);
-        self.write(
+        self.push(
+            self.channels.lidar,
+            log_time_ns,
+            lidar_cloud(scan).encode_cdr(false),
+        );
+        self.push(
             self.channels.truth_points,
             log_time_ns,
-            &truth_cloud.encode_cdr(false),
-        )?;
+            truth_cloud(scan).encode_cdr(false),
+        );
         let truth = serde_json::to_vec(&TruthScan::new(world, scan)).expect("truth serialises");
-        self.write(self.channels.truth_scan, log_time_ns, &truth)
+        self.push(self.channels.truth_scan, log_time_ns, truth);
     }
 
     /// IMU, twist and odometry messages with stamps in [motion_until_s, until_s).
-    fn write_motion_until(
-        &mut self,
-        world: &World,
-        until_s: f64,
-        seed: u64,
-    ) -> Result<(), OutputError> {
+    fn encode_motion_until(&mut self, world: &World, until_s: f64, seed: u64) {
         let imu_period_s = 1.0 / world.scenario.imu.rate_hz;
         let velocity_period_s = 1.0 / world.scenario.velocity_rate_hz;
         loop {
@@ -238,37 +272,28 @@ impl<'w> SynthLog<'w> {
             }
             if next_imu_s <= next_velocity_s {
                 let imu = imu_message(world, next_imu_s, self.imu_index, seed);
-                self.write(
+                self.push(
                     self.channels.imu,
                     stamp_ns(next_imu_s),
-                    &imu.encode_cdr(false),
-                )?;
+                    imu.encode_cdr(false),
+                );
                 self.imu_index += 1;
             } else {
                 let (twist, odometry) = velocity_messages(world, next_velocity_s);
-                self.write(
-                    self.channels.twist,
-                    stamp_ns(next_velocity_s),
-                    &twist.encode_cdr(false),
-                )?;
-                self.write(
-                    self.channels.odometry,
-                    stamp_ns(next_velocity_s),
-                    &odometry.encode_cdr(false),
-                )?;
+                let stamp = stamp_ns(next_velocity_s);
+                self.push(self.channels.twist, stamp, twist.encode_cdr(false));
+                self.push(self.channels.odometry, stamp, odometry.encode_cdr(false));
                 self.velocity_index += 1;
             }
         }
         self.motion_until_s = until_s;
-        Ok(())
     }
 
-    pub fn write_events(&mut self, events: &[TruthEvent]) -> Result<(), OutputError> {
+    pub fn encode_events(&mut self, events: &[TruthEvent]) {
         for event in events {
             let data = serde_json::to_vec(event).expect("events serialise");
-            self.write(self.channels.truth_events, event.start_ns, &data)?;
+            self.push(self.channels.truth_events, event.start_ns, data);
         }
-        Ok(())
     }
 }
 

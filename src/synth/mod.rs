@@ -55,6 +55,8 @@ pub enum SynthError {
     Scenario(#[from] ScenarioError),
     #[error(transparent)]
     Output(#[from] OutputError),
+    #[error("internal error: {0}")]
+    Internal(String),
 }
 
 /// The scenario with the command-line overrides applied, validated.
@@ -98,18 +100,39 @@ pub fn synthesize(options: &SynthOptions) -> Result<SynthSummary, SynthError> {
     let world = sensor::World::new(scenario.clone());
     let first_scan = world.first_scan_at(options.start_s.unwrap_or(0.0));
     let mut log = messages::SynthLog::new(&mut writer, &world, first_scan)?;
-    log.write_metadata(&scenario, options.seed, options.start_s.unwrap_or(0.0))?;
-    let mut events = truth::EventTracker::new(&scenario);
-    let mut points = 0;
-    for index in first_scan..world.scan_count() {
-        let scan = world.scan(index, options.seed);
-        points += scan.points.len() as u64;
-        events.observe(&world, &scan);
-        log.write_interval(&world, &scan, options.seed)?;
-    }
-    let events = events.finish(&world);
-    log.write_events(&events)?;
-    let messages = log.messages_written();
+    let mut sequenced = messages::SequencedWriter::new(&mut writer);
+    sequenced.write_metadata(&scenario, options.seed, options.start_s.unwrap_or(0.0))?;
+    // Simulation and encoding on one thread, writing (zstd) on this one.
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<messages::Encoded>>(2);
+    let (points, events) =
+        std::thread::scope(|scope| -> Result<(u64, Vec<TruthEvent>), SynthError> {
+            let producer = scope.spawn(|| {
+                let mut events = truth::EventTracker::new(&scenario);
+                let mut points = 0;
+                for index in first_scan..world.scan_count() {
+                    let scan = world.scan(index, options.seed);
+                    points += scan.points.len() as u64;
+                    events.observe(&world, &scan);
+                    log.encode_interval(&world, &scan, options.seed);
+                    if tx.send(log.take()).is_err() {
+                        break;
+                    }
+                }
+                let events = events.finish(&world);
+                log.encode_events(&events);
+                let _ = tx.send(log.take());
+                drop(tx);
+                (points, events)
+            });
+            for batch in rx {
+                sequenced.write_all(batch)?;
+            }
+            producer
+                .join()
+                .map_err(|_| SynthError::Internal("the simulation thread panicked".into()))
+                .map(Ok)?
+        })?;
+    let messages = sequenced.messages_written();
     let output_bytes = writer.finish()?;
     Ok(SynthSummary {
         scenario: scenario.name.clone(),
