@@ -21,6 +21,12 @@ Exit codes:
      or is the input, input already processed
   3  --strict and the input had a bad message, a bad chunk CRC or was truncated";
 
+const SYNTH_EXIT_CODES: &str = "\
+Exit codes:
+  0  success
+  1  failure: the output could not be written
+  2  usage: bad arguments, unknown or invalid scenario, output exists (see --force)";
+
 /// Looming (inverse time to contact) from LiDAR drive logs in MCAP.
 ///
 /// Reads the LiDAR point clouds and IMU / velocity channels of a log, pairs
@@ -46,7 +52,7 @@ enum Command {
     ///
     /// Built-in scenarios: straight-road, urban-turn, follow, cut-in, crossing,
     /// safe-drive (see docs/scenarios.md); or a scenario JSON file.
-    #[command(after_help = EXIT_CODES)]
+    #[command(after_help = SYNTH_EXIT_CODES)]
     Synth(SynthArgs),
 }
 

@@ -294,6 +294,14 @@ impl OutputWriter {
             .into_inner()
             .into_inner()
             .map_err(|e| finish_err(e.into_error()))?;
+        // Temporary files are created private (0600); the output is an
+        // ordinary file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            file.set_permissions(std::fs::Permissions::from_mode(0o644))
+                .map_err(finish_err)?;
+        }
         file.sync_all().map_err(finish_err)?;
         let size = file.metadata().map_err(finish_err)?.len();
         drop(file);

@@ -73,13 +73,14 @@ impl EgoState {
 pub struct EgoTrack {
     speed_mps: Profile,
     yaw_rate_radps: Profile,
-    imu_height_m: f64,
+    /// World z of the vehicle frame: road height + IMU height above it.
+    imu_z_m: f64,
     /// (x, y, yaw) at k * TRACK_STEP_S.
     samples: Vec<[f64; 3]>,
 }
 
 impl EgoTrack {
-    pub fn new(spec: &EgoSpec, duration_s: f64) -> Self {
+    pub fn new(spec: &EgoSpec, ground_height_m: f64, duration_s: f64) -> Self {
         let yaw_rate_radps: Profile = spec
             .yaw_rate_dps
             .iter()
@@ -115,7 +116,7 @@ impl EgoTrack {
         Self {
             speed_mps: spec.speed_mps.clone(),
             yaw_rate_radps,
-            imu_height_m: spec.imu_height_m,
+            imu_z_m: ground_height_m + spec.imu_height_m,
             samples,
         }
     }
@@ -142,7 +143,7 @@ impl EgoTrack {
         let x = hermite(a[0], b[0], va[0], vb[0], u);
         let y = hermite(a[1], b[1], va[1], vb[1], u);
         EgoState {
-            position_m: Vector3::new(x, y, self.imu_height_m),
+            position_m: Vector3::new(x, y, self.imu_z_m),
             yaw_rad: yaw,
             speed_mps: speed_at(t_s),
             yaw_rate_radps: rate_at(t_s),
@@ -222,7 +223,7 @@ fn trajectory_motion(points: &[[f64; 3]], t_s: f64) -> ([f64; 2], [f64; 2]) {
         (Some(first), Some(last)) => (first, last),
         _ => return ([0.0; 2], [0.0; 2]),
     };
-    if t_s <= first[0] {
+    if t_s < first[0] {
         return ([first[1], first[2]], [0.0; 2]);
     }
     for w in points.windows(2) {
@@ -253,7 +254,7 @@ mod tests {
 
     #[test]
     fn a_constant_turn_follows_the_exact_circle() {
-        let track = EgoTrack::new(&ego(10.0, 20.0), 10.0);
+        let track = EgoTrack::new(&ego(10.0, 20.0), 0.0, 10.0);
         let omega = 20f64.to_radians();
         let radius = 10.0 / omega;
         for t in [0.0, 0.0123, 1.0, 3.3337, 7.5, 9.9999] {
@@ -279,7 +280,7 @@ mod tests {
             speed_mps: vec![[0.0, 12.0], [1.0, 12.0], [3.0, 2.0]],
             ..ego(0.0, 0.0)
         };
-        let track = EgoTrack::new(&spec, 5.0);
+        let track = EgoTrack::new(&spec, 0.0, 5.0);
         // 12 m in the first second, then the trapezoid: 2 s at a mean of 7 m/s.
         assert!((track.state(3.0).position_m.x - 26.0).abs() < 1e-6);
         assert!((track.state(2.0).accel_long_mps2 + 5.0).abs() < 1e-12);
@@ -288,7 +289,7 @@ mod tests {
 
     #[test]
     fn the_imu_reads_gravity_and_centripetal_acceleration() {
-        let track = EgoTrack::new(&ego(10.0, 20.0), 2.0);
+        let track = EgoTrack::new(&ego(10.0, 20.0), 0.0, 2.0);
         let (force, gyro) = track.state(1.0).imu_reading();
         let omega = 20f64.to_radians();
         assert!((force.z - GRAVITY_MPS2).abs() < 1e-12);
@@ -302,7 +303,7 @@ mod tests {
 
     #[test]
     fn the_lidar_velocity_includes_the_lever_arm() {
-        let track = EgoTrack::new(&ego(10.0, 20.0), 1.0);
+        let track = EgoTrack::new(&ego(10.0, 20.0), 0.0, 1.0);
         let mount = vehicle_from_lidar([1.0, 0.0, 1.0], [0.0, 0.0, 0.0]);
         let lidar = LidarState::new(&track.state(0.0), &mount);
         // omega x (1, 0, 1) = (0, omega, 0): a sideways component.

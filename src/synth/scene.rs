@@ -316,6 +316,24 @@ impl Scenario {
         check_profile(&self.ego.speed_mps).map_err(|e| invalid(format!("ego.speed_mps: {e}")))?;
         check_profile(&self.ego.yaw_rate_dps)
             .map_err(|e| invalid(format!("ego.yaw_rate_dps: {e}")))?;
+        positive(self.events.ttc_threshold_s, "events.ttc_threshold_s")?;
+        if self.events.min_points < 1 {
+            return Err(invalid("events.min_points must be at least 1".into()));
+        }
+        for object in &self.static_objects {
+            let sizes: Vec<f64> = match object {
+                StaticObject::Box { size_m, .. } => size_m.to_vec(),
+                StaticObject::Car { .. } => Vec::new(),
+                StaticObject::Pole {
+                    radius_m, height_m, ..
+                } => vec![*radius_m, *height_m],
+            };
+            if sizes.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                return Err(invalid(format!(
+                    "static object {object:?}: sizes must be positive"
+                )));
+            }
+        }
         let mut ids = std::collections::BTreeSet::new();
         for actor in &self.actors {
             if actor.id == 0 || !ids.insert(actor.id) {

@@ -82,7 +82,11 @@ pub struct World {
 
 impl World {
     pub fn new(scenario: Scenario) -> Self {
-        let track = EgoTrack::new(&scenario.ego, scenario.duration_s + 1.0);
+        let track = EgoTrack::new(
+            &scenario.ego,
+            scenario.ground_height_m,
+            scenario.duration_s + 1.0,
+        );
         let lidar = &scenario.lidar;
         let vehicle_from_lidar = vehicle_from_lidar(lidar.mount_xyz_m, lidar.mount_rpy_deg);
         let elevations_rad = beam_elevations_rad(

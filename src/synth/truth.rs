@@ -162,8 +162,9 @@ impl EventTracker {
             for window in split_windows(scans) {
                 let (first, last) = (window[0].0, window[window.len() - 1].0);
                 let peak = window.iter().map(|w| w.1).fold(f64::MIN, f64::max);
-                let start_s = first as f64 * world.period_s;
-                let end_s = (last + 1) as f64 * world.period_s;
+                // Whole nanoseconds, as the stamps are.
+                let start_s = round_ns(first as f64 * world.period_s);
+                let end_s = round_ns((last + 1) as f64 * world.period_s);
                 events.push(TruthEvent {
                     actor_id: *actor_id,
                     label: label.clone(),
@@ -182,6 +183,10 @@ impl EventTracker {
         events.sort_by_key(|e| (e.start_ns, e.actor_id));
         events
     }
+}
+
+fn round_ns(t_s: f64) -> f64 {
+    (t_s * 1e9).round() / 1e9
 }
 
 fn split_windows(scans: &[(u64, f64)]) -> Vec<&[(u64, f64)]> {
