@@ -313,7 +313,7 @@ fn lidar_cloud(scan: &SimScan) -> PointCloud2<'static> {
 }
 
 /// Field layout of `/truth/points` (one point per `/lidar/points` point, same order).
-const TRUTH_POINT_STEP: u32 = 24;
+const TRUTH_POINT_STEP: u32 = 28;
 
 fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
     // No x, y, z: the noise-free point is `range` along the measured point's
@@ -322,10 +322,11 @@ fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
         PointField::new("range", 0, datatype::FLOAT32),
         PointField::new("point_looming", 4, datatype::FLOAT32),
         PointField::new("ray_looming", 8, datatype::FLOAT32),
-        PointField::new("incidence_cos", 12, datatype::FLOAT32),
-        PointField::new("object_id", 16, datatype::UINT32),
-        PointField::new("surface", 20, datatype::UINT8),
-        PointField::new("moving", 21, datatype::UINT8),
+        PointField::new("own_motion_looming", 12, datatype::FLOAT32),
+        PointField::new("incidence_cos", 16, datatype::FLOAT32),
+        PointField::new("object_id", 20, datatype::UINT32),
+        PointField::new("surface", 24, datatype::UINT8),
+        PointField::new("moving", 25, datatype::UINT8),
     ];
     let mut data = Vec::with_capacity(scan.points.len() * TRUTH_POINT_STEP as usize);
     for point in &scan.points {
@@ -333,6 +334,7 @@ fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
         data.extend_from_slice(&(truth.range_m as f32).to_le_bytes());
         data.extend_from_slice(&(truth.point_looming_per_s as f32).to_le_bytes());
         data.extend_from_slice(&(truth.ray_looming_per_s as f32).to_le_bytes());
+        data.extend_from_slice(&(truth.own_motion_looming_per_s as f32).to_le_bytes());
         data.extend_from_slice(&(truth.incidence_cos as f32).to_le_bytes());
         data.extend_from_slice(&truth.object_id.to_le_bytes());
         data.push(truth.surface as u8);

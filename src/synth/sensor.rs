@@ -40,6 +40,10 @@ pub struct PointTruth {
     /// `-(dR/dt)/R` along the ray, its direction held fixed in a non-rotating
     /// frame (what a rotation-compensated range difference measures). 1/s.
     pub ray_looming_per_s: f64,
+    /// The part of the ray looming caused by the hit object's own motion:
+    /// `ray_looming` minus what it would be were the object static (0 on the
+    /// static world). This is the truth of the disagreement D = L_lidar - L_ray_ego.
+    pub own_motion_looming_per_s: f64,
     /// `|n . d|`: cosine of the angle between the ray and the surface normal
     /// (1 = the surface faces the ray, 0 = grazing).
     pub incidence_cos: f64,
@@ -255,13 +259,20 @@ impl World {
         let point_lidar = direction_lidar * hit.range_m;
         let velocity_rel_lidar = lidar.to_lidar(&velocity_rel_world);
         let point_looming_per_s = velocity_rel_lidar.dot(&point_lidar) / point_lidar.norm_squared();
-        let ray_looming_per_s =
-            hit.normal.dot(&velocity_rel_world) / (hit.normal.dot(direction_world) * hit.range_m);
+        let along_ray = hit.normal.dot(direction_world) * hit.range_m;
+        let ray_looming_per_s = hit.normal.dot(&velocity_rel_world) / along_ray;
+        // What the ray looming would be were the object static: the rest is its own motion.
+        let own_motion_looming_per_s = if hit.moving {
+            ray_looming_per_s - hit.normal.dot(&lidar.velocity_world_mps) / along_ray
+        } else {
+            0.0
+        };
         PointTruth {
             point_m: [point_lidar.x, point_lidar.y, point_lidar.z],
             range_m: hit.range_m,
             point_looming_per_s,
             ray_looming_per_s,
+            own_motion_looming_per_s,
             incidence_cos: hit.normal.dot(direction_world).abs(),
             object_id: hit.object_id,
             surface,
