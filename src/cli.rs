@@ -54,6 +54,24 @@ enum Command {
     /// safe-drive (see docs/scenarios.md); or a scenario JSON file.
     #[command(after_help = SYNTH_EXIT_CODES)]
     Synth(SynthArgs),
+    /// Measure the engine against ground truth: per quantity and class of cell,
+    /// median / p90 |error| and bias, and moving-object precision / recall / F1.
+    ///
+    /// FILE must carry /truth/points (a `looming synth` drive, processed or not).
+    Eval(EvalArgs),
+}
+
+#[derive(Debug, Args)]
+struct EvalArgs {
+    /// Log with ground truth.
+    file: PathBuf,
+    /// Also write the report as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Difference scans without de-rotating the previous one (to measure what
+    /// rotation compensation buys).
+    #[arg(long)]
+    no_rotation_compensation: bool,
 }
 
 #[derive(Debug, Args)]
@@ -175,7 +193,22 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Process(args) => process(args),
         Command::Inspect(args) => inspect(args),
         Command::Synth(args) => synth(args),
+        Command::Eval(args) => eval(args),
     }
+}
+
+fn eval(args: EvalArgs) -> Result<(), Failure> {
+    let config = looming::engine::EngineConfig {
+        rotation_compensation: !args.no_rotation_compensation,
+        ..Default::default()
+    };
+    let report = looming::eval::evaluate(&args.file, &config)?;
+    print!("{}", report.to_text());
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .map_err(|e| anyhow::anyhow!("{}: cannot write the report: {e}", path.display()))?;
+    }
+    Ok(())
 }
 
 fn synth(args: SynthArgs) -> Result<(), Failure> {

@@ -6,6 +6,8 @@
 //! [`pipeline`] wires them together on threads with bounded channels.
 
 pub mod decode;
+pub mod engine;
+pub mod eval;
 pub mod fixtures;
 pub mod input;
 pub mod inspect;

@@ -1,0 +1,542 @@
+//! The looming engine: a pure function of a scan pair and a configuration (no
+//! I/O, no global state, deterministic; rayon inside) computing, per cell of
+//! the current scan's range image and per point, the quantities of
+//! `../shared/design/METHOD.md`:
+//!
+//! - `L_lidar`: range change along rotation-compensated rays (LiDAR only);
+//! - `L_ego`: `(t . p)/(p . p)` per point from the ego velocity;
+//! - `L_ray_ego`: what `L_lidar` would read were the world static;
+//! - `D = L_lidar - L_ray_ego`, the looming of other objects' own motion, and a
+//!   moving flag;
+//! - a fused looming, its noise, an edge / occlusion / grazing mask, threat
+//!   levels and the equal-looming spheres.
+//!
+//! The previous scan is compared to the current one by rendering its surface
+//! (a triangle mesh over its range image, moved by the gyro rotation for
+//! `L_lidar` and by the full ego motion for `L_ray_ego`) into the current
+//! scan's own rays: exact on planes, so neither discretisation nor turning
+//! lights up the static world.
+
+pub mod beams;
+pub mod grid;
+mod surface;
+pub mod threat;
+pub mod trajectory;
+mod warp;
+
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+use crate::messages::{Scan, StampNs};
+use crate::pairing::ScanPair;
+
+pub use grid::{ImageGeometry, NO_POINT, RangeImage};
+pub use threat::{ThreatLevel, ThreatSphere};
+
+use surface::{SurfaceParams, Surfaces};
+use trajectory::{MotionModel, Trajectory};
+
+/// Engine settings.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct EngineConfig {
+    /// Columns of the range image [default: the most points any beam holds].
+    pub columns: Option<usize>,
+    /// Range noise of the sensor (1 sigma), metres.
+    pub range_noise_m: f64,
+    /// Compensate the gyro rotation before differencing (METHOD.md); off only
+    /// to measure what it buys.
+    pub rotation_compensation: bool,
+    /// Threat thresholds as times to contact, seconds: low, medium, high.
+    pub threat_ttc_s: [f64; 3],
+    /// A cell moves when |D| exceeds this many sigmas...
+    pub moving_sigmas: f64,
+    /// ...and this much, 1/s.
+    pub moving_min_per_s: f64,
+    /// Cells whose surface is seen more obliquely than this (|n . e|) are masked.
+    pub grazing_cos: f64,
+}
+
+impl Default for EngineConfig {
+    fn default() -> Self {
+        Self {
+            columns: None,
+            range_noise_m: 0.02,
+            rotation_compensation: true,
+            // Autey 2012; Sacchi & Sayed 2016; Hayward 1972.
+            threat_ttc_s: [3.0, 1.5, 1.0],
+            moving_sigmas: 4.0,
+            moving_min_per_s: 0.1,
+            grazing_cos: 0.15,
+        }
+    }
+}
+
+/// Why a cell's values are not to be trusted (bit flags).
+pub mod mask {
+    /// No return in the current scan.
+    pub const EMPTY: u8 = 1;
+    /// The previous scan has no surface along this ray (disocclusion, edge of view).
+    pub const NO_PREVIOUS: u8 = 2;
+    /// Next to an occlusion edge (a neighbour on another surface).
+    pub const EDGE: u8 = 4;
+    /// Surface seen at grazing incidence.
+    pub const GRAZING: u8 = 8;
+    /// The ego-motion prediction has no surface here (only with a velocity source).
+    pub const NO_EGO: u8 = 16;
+}
+
+/// What the engine could compute for a pair.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Availability {
+    /// A velocity source covered the pair: `L_ego`, `L_ray_ego`, `D`, moving,
+    /// threat spheres are computed.
+    pub ego_velocity: bool,
+    /// An angular rate was used to de-rotate the previous scan.
+    pub rotation_compensated: bool,
+}
+
+/// Everything the engine computed for one pair, reported on the current scan.
+#[derive(Debug, Clone)]
+pub struct PairLooming {
+    pub geometry: ImageGeometry,
+    pub availability: Availability,
+    /// The current scan gridded (cell -> point index, nearest range).
+    pub image: RangeImage,
+    /// Per cell, 1/s (NaN where not computed).
+    pub l_lidar: Vec<f32>,
+    pub l_ray_ego: Vec<f32>,
+    pub disagreement: Vec<f32>,
+    /// Noise of `L_lidar` from the range-noise model, 1/s.
+    pub sigma_per_s: Vec<f32>,
+    /// 1 / (1 + (sigma / 0.05)^2): 1 = clean, 0.5 at sigma 0.05 1/s.
+    pub confidence: Vec<f32>,
+    /// `mask::*` bits; 0 = trusted.
+    pub mask: Vec<u8>,
+    pub moving: Vec<bool>,
+    pub fused: Vec<f32>,
+    pub threat: Vec<ThreatLevel>,
+    /// Time between the compared returns, s.
+    pub dt_s: Vec<f32>,
+    /// Per point of the current scan: its cell (`NO_POINT` if none).
+    pub point_cell: Vec<u32>,
+    /// Per point: `L_ego`, 1/s (NaN without velocity).
+    pub l_ego: Vec<f32>,
+    /// Per point: threat level of its cell when the point is that cell's surface.
+    pub point_threat: Vec<ThreatLevel>,
+    /// Equal-looming spheres of the low, medium and high levels (LiDAR frame),
+    /// from the velocity at the current stamp.
+    pub spheres: Option<[ThreatSphere; 3]>,
+    /// LiDAR velocity used for the spheres, m/s.
+    pub velocity_mps: Option<[f64; 3]>,
+}
+
+/// Run the engine on a pair. `None` when the scans give no usable image.
+pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
+    let (previous, current) = (&*pair.previous, &*pair.current);
+    let geometry = grid::geometry_for(previous, current, config.columns)?;
+    let params = SurfaceParams {
+        range_noise_m: config.range_noise_m,
+    };
+    let (prev_image, cur_image) = rayon::join(
+        || RangeImage::build(previous, &geometry),
+        || RangeImage::build(current, &geometry),
+    );
+    let (prev_surfaces, cur_surfaces) = rayon::join(
+        || Surfaces::estimate(previous, &prev_image, &geometry, params),
+        || Surfaces::estimate(current, &cur_image, &geometry, params),
+    );
+    let prev_time = cell_times(previous, &prev_image);
+    let cur_time = cell_times(current, &cur_image);
+    let coords = cell_coords(&cur_surfaces, &geometry);
+    let column_time = column_times(&cur_time, &cur_surfaces, &geometry);
+    let (start_ns, end_ns) = (
+        previous.time_span_ns().0 - 1_000_000,
+        current.time_span_ns().1 + 1_000_000,
+    );
+    let rotation_rate_known = pair.motion.angular.is_some();
+    let rotate = config.rotation_compensation && rotation_rate_known;
+    let rotation = Trajectory::integrate(
+        &pair.motion,
+        MotionModel::RotationOnly,
+        rotate,
+        start_ns,
+        end_ns,
+    )?;
+    let full = Trajectory::integrate(
+        &pair.motion,
+        MotionModel::Full,
+        rotation_rate_known,
+        start_ns,
+        end_ns,
+    );
+    let source = warp::Source {
+        surfaces: &prev_surfaces,
+        time_ns: &prev_time,
+        range_noise_m: config.range_noise_m,
+    };
+    let target = warp::Target {
+        surfaces: &cur_surfaces,
+        coords: &coords,
+        column_time_ns: &column_time,
+    };
+    let offset_ns = current.stamp_ns - previous.stamp_ns;
+    let (rotated, moved) = rayon::join(
+        || warp::render(&source, &target, &geometry, &rotation, offset_ns),
+        || {
+            full.as_ref()
+                .map(|t| warp::render(&source, &target, &geometry, t, offset_ns))
+        },
+    );
+    let cells = per_cell(
+        config,
+        &geometry,
+        &cur_surfaces,
+        &cur_time,
+        &rotated,
+        moved.as_ref(),
+    );
+    let velocity = pair.motion.velocity_at(current.stamp_ns);
+    let l_ego = ego_looming(current, pair);
+    let point_threat = point_threats(current, &cur_image, &cells.threat);
+    Some(PairLooming {
+        availability: Availability {
+            ego_velocity: full.is_some(),
+            rotation_compensated: rotate,
+        },
+        spheres: velocity.map(|v| threat::spheres(&v, &config.threat_ttc_s)),
+        velocity_mps: velocity.map(|v| [v.x, v.y, v.z]),
+        point_cell: cur_image.point_cell.clone(),
+        image: cur_image,
+        geometry,
+        l_lidar: cells.l_lidar,
+        l_ray_ego: cells.l_ray_ego,
+        disagreement: cells.disagreement,
+        sigma_per_s: cells.sigma,
+        confidence: cells.confidence,
+        mask: cells.mask,
+        moving: cells.moving,
+        fused: cells.fused,
+        threat: cells.threat,
+        dt_s: cells.dt_s,
+        l_ego,
+        point_threat,
+    })
+}
+
+/// Absolute time of each cell's return, ns.
+fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
+    image
+        .point
+        .iter()
+        .map(|&index| {
+            if index == NO_POINT {
+                return scan.stamp_ns;
+            }
+            let offset_s = scan
+                .time_offset_s
+                .as_ref()
+                .map_or(0.0, |t| f64::from(t[index as usize]));
+            scan.stamp_ns + (offset_s * 1e9).round() as StampNs
+        })
+        .collect()
+}
+
+/// Continuous (row, column) of each occupied cell's ray.
+fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)> {
+    surfaces
+        .direction
+        .iter()
+        .map(|d| {
+            let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
+            let row = geometry.row_f(z.atan2(x.hypot(y)));
+            let col = geometry.col_f(y.atan2(x));
+            (row as f32, col as f32)
+        })
+        .collect()
+}
+
+/// Median firing time of each column of the current scan (`StampNs::MIN` for
+/// an empty column).
+fn column_times(
+    time_ns: &[StampNs],
+    surfaces: &Surfaces,
+    geometry: &ImageGeometry,
+) -> Vec<StampNs> {
+    (0..geometry.cols)
+        .map(|col| {
+            let mut times: Vec<StampNs> = (0..geometry.rows)
+                .map(|row| row * geometry.cols + col)
+                .filter(|&cell| surfaces.range_m[cell].is_finite())
+                .map(|cell| time_ns[cell])
+                .collect();
+            if times.is_empty() {
+                return StampNs::MIN;
+            }
+            times.sort_unstable();
+            times[times.len() / 2]
+        })
+        .collect()
+}
+
+struct CellValues {
+    l_lidar: Vec<f32>,
+    l_ray_ego: Vec<f32>,
+    disagreement: Vec<f32>,
+    sigma: Vec<f32>,
+    confidence: Vec<f32>,
+    mask: Vec<u8>,
+    moving: Vec<bool>,
+    fused: Vec<f32>,
+    threat: Vec<ThreatLevel>,
+    dt_s: Vec<f32>,
+}
+
+/// First pass per cell: the differences, the noise and the mask.
+#[derive(Clone, Copy)]
+struct Raw {
+    l_lidar: f32,
+    l_ray_ego: f32,
+    sigma: f32,
+    mask: u8,
+    dt_s: f32,
+}
+
+fn per_cell(
+    config: &EngineConfig,
+    geometry: &ImageGeometry,
+    current: &Surfaces,
+    current_time: &[StampNs],
+    rotated: &warp::Rendered,
+    moved: Option<&warp::Rendered>,
+) -> CellValues {
+    let raw: Vec<Raw> = (0..geometry.cells())
+        .into_par_iter()
+        .map(|cell| raw_cell(config, current, current_time, rotated, moved, cell))
+        .collect();
+    let candidate: Vec<bool> = raw
+        .iter()
+        .map(|r| {
+            let d = r.l_lidar - r.l_ray_ego;
+            r.mask == 0
+                && d.is_finite()
+                && f64::from(d.abs())
+                    > (config.moving_sigmas * f64::from(r.sigma)).max(config.moving_min_per_s)
+        })
+        .collect();
+    // A moving object is a patch, not a lone noisy cell: keep candidates with a
+    // candidate neighbour.
+    let moving: Vec<bool> = (0..geometry.cells())
+        .map(|cell| candidate[cell] && neighbours(geometry, cell).any(|n| candidate[n]))
+        .collect();
+    let fused: Vec<f32> = (0..geometry.cells())
+        .into_par_iter()
+        .map(|cell| fuse(geometry, &raw, &moving, cell))
+        .collect();
+    let thresholds = config.threat_ttc_s;
+    let threat = fused
+        .iter()
+        .zip(&raw)
+        .map(|(f, r)| {
+            if r.mask == 0 {
+                ThreatLevel::of(f64::from(*f), &thresholds)
+            } else {
+                ThreatLevel::None
+            }
+        })
+        .collect();
+    CellValues {
+        disagreement: raw.iter().map(|r| r.l_lidar - r.l_ray_ego).collect(),
+        l_lidar: raw.iter().map(|r| r.l_lidar).collect(),
+        l_ray_ego: raw.iter().map(|r| r.l_ray_ego).collect(),
+        confidence: raw
+            .iter()
+            .map(|r| 1.0 / (1.0 + (r.sigma / 0.05).powi(2)))
+            .collect(),
+        sigma: raw.iter().map(|r| r.sigma).collect(),
+        mask: raw.iter().map(|r| r.mask).collect(),
+        dt_s: raw.iter().map(|r| r.dt_s).collect(),
+        moving,
+        fused,
+        threat,
+    }
+}
+
+fn raw_cell(
+    config: &EngineConfig,
+    current: &Surfaces,
+    current_time: &[StampNs],
+    rotated: &warp::Rendered,
+    moved: Option<&warp::Rendered>,
+    cell: usize,
+) -> Raw {
+    let nan = Raw {
+        l_lidar: f32::NAN,
+        l_ray_ego: f32::NAN,
+        sigma: f32::NAN,
+        mask: mask::EMPTY,
+        dt_s: f32::NAN,
+    };
+    let range_now = f64::from(current.range_m[cell]);
+    if !range_now.is_finite() {
+        return nan;
+    }
+    let mut flags = 0;
+    if current.edge[cell] {
+        flags |= mask::EDGE;
+    }
+    if f64::from(current.incidence_cos[cell]) < config.grazing_cos {
+        flags |= mask::GRAZING;
+    }
+    // The previous surface along this ray must be the surface seen now: a
+    // covering triangle tilted away from the current plane straddles a crease
+    // (road meeting a wall) or an occlusion, where the difference means nothing.
+    let current_normal = current.normal[cell];
+    let creased = |normal: &[f32; 3]| {
+        let known = |n: &[f32; 3]| n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.5;
+        known(normal)
+            && known(&current_normal)
+            && (normal[0] * current_normal[0]
+                + normal[1] * current_normal[1]
+                + normal[2] * current_normal[2])
+                .abs()
+                < CREASE_COS
+    };
+    if creased(&rotated.normal[cell])
+        || moved.is_some_and(|m| creased(&m.normal[cell]))
+        || rotated.edge[cell]
+        || moved.is_some_and(|m| m.edge[cell])
+    {
+        flags |= mask::EDGE;
+    }
+    let range_before = f64::from(rotated.range_m[cell]);
+    let dt_s = (current_time[cell] - rotated.source_time_ns[cell]) as f64 * 1e-9;
+    if !range_before.is_finite() || dt_s <= 0.0 {
+        return Raw {
+            mask: flags | mask::NO_PREVIOUS,
+            ..nan
+        };
+    }
+    let l_lidar = -(range_now - range_before) / (dt_s * range_now);
+    if std::env::var_os("LOOMING_DEBUG2").is_some() && l_lidar < -2.0 && flags == 0 {
+        eprintln!(
+            "DBG2 cell {cell} now {range_now:.2} before {range_before:.2} dt {dt_s:.4} n_now {:?} n_before {:?} dir {:?}",
+            current.normal[cell], rotated.normal[cell], current.direction[cell]
+        );
+    }
+    let l_ray_ego = match moved {
+        Some(moved) => {
+            let predicted = f64::from(moved.range_m[cell]);
+            if predicted.is_finite() {
+                // The measured range as reference: on a plane the predicted
+                // displacement is the same at any range, so this is the static
+                // world's looming at the current geometry and D is exactly the
+                // looming of the object's own motion (METHOD.md's R-hat in the
+                // denominator differs by R / R-hat on moving objects).
+                -(predicted - range_before) / (dt_s * range_now)
+            } else {
+                flags |= mask::NO_EGO;
+                f64::NAN
+            }
+        }
+        None => f64::NAN,
+    };
+    // Both ranges are plane fits of several returns; the rendered one mixes
+    // three vertices: about sigma / sqrt(2) each, conservatively.
+    let support = f64::from(current.support[cell].max(1));
+    let sigma_now = config.range_noise_m * (1.0 / support).sqrt().max(0.4);
+    let sigma_before = config.range_noise_m * 0.6;
+    let sigma = (sigma_now.powi(2) + sigma_before.powi(2)).sqrt() / (dt_s * range_now);
+    Raw {
+        l_lidar: l_lidar as f32,
+        l_ray_ego: l_ray_ego as f32,
+        sigma: sigma as f32,
+        mask: flags,
+        dt_s: dt_s as f32,
+    }
+}
+
+/// Cosine of the largest angle between the current surface and the previous
+/// surface rendered along the same ray (25 degrees).
+const CREASE_COS: f32 = 0.906;
+
+/// The 8 neighbours of a cell (columns wrap).
+fn neighbours(geometry: &ImageGeometry, cell: usize) -> impl Iterator<Item = usize> + '_ {
+    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    (-1i64..=1).flat_map(move |dr| {
+        (-1i64..=1).filter_map(move |dc| {
+            let r = row as i64 + dr;
+            if (dr == 0 && dc == 0) || r < 0 || r >= geometry.rows as i64 {
+                return None;
+            }
+            let c = (col as i64 + dc).rem_euclid(geometry.cols as i64) as usize;
+            Some(r as usize * geometry.cols + c)
+        })
+    })
+}
+
+/// The best estimate per cell: on the static world the ego prediction (exact
+/// up to the ego-motion error) weighed with the measurement by their noise; on
+/// moving cells the measurement, averaged over moving neighbours to cut its
+/// noise; without ego motion, the measurement.
+fn fuse(geometry: &ImageGeometry, raw: &[Raw], moving: &[bool], cell: usize) -> f32 {
+    let r = raw[cell];
+    if !r.l_lidar.is_finite() {
+        return f32::NAN;
+    }
+    if moving[cell] {
+        let (sum, count) = std::iter::once(cell)
+            .chain(neighbours(geometry, cell))
+            .filter(|&n| moving[n] && raw[n].l_lidar.is_finite() && raw[n].mask == 0)
+            .fold((0.0f64, 0usize), |(s, c), n| {
+                (s + f64::from(raw[n].l_lidar), c + 1)
+            });
+        return (sum / count.max(1) as f64) as f32;
+    }
+    if !r.l_ray_ego.is_finite() {
+        return r.l_lidar;
+    }
+    // The ego prediction's own error: velocity error (about 1 %) and the
+    // interpolation of the previous surface.
+    let sigma_ego = 0.01 * f64::from(r.l_ray_ego.abs()) + 0.005;
+    let w_ego = 1.0 / sigma_ego.powi(2);
+    let w_lidar = 1.0 / f64::from(r.sigma).max(1e-6).powi(2);
+    ((f64::from(r.l_ray_ego) * w_ego + f64::from(r.l_lidar) * w_lidar) / (w_ego + w_lidar)) as f32
+}
+
+/// `L_ego = (t . p)/(p . p)` per point, `t` at the point's own time.
+fn ego_looming(scan: &Scan, pair: &ScanPair) -> Vec<f32> {
+    (0..scan.points_m.len())
+        .into_par_iter()
+        .map(|i| {
+            let offset_s = scan.time_offset_s.as_ref().map_or(0.0, |t| f64::from(t[i]));
+            let t_ns = scan.stamp_ns + (offset_s * 1e9).round() as StampNs;
+            let Some(velocity) = pair.motion.velocity_at(t_ns) else {
+                return f32::NAN;
+            };
+            let p = scan.points_m[i];
+            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            (velocity.dot(&p) / p.norm_squared()) as f32
+        })
+        .collect()
+}
+
+/// A point takes its cell's threat level when it is the surface the cell
+/// measured (within 5 % of the cell's range); hidden returns behind it do not.
+fn point_threats(scan: &Scan, image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel> {
+    scan.points_m
+        .iter()
+        .zip(&image.point_cell)
+        .map(|(p, &cell)| {
+            if cell == NO_POINT {
+                return ThreatLevel::None;
+            }
+            let cell = cell as usize;
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            if r <= image.range_m[cell] * 1.05 {
+                threat[cell]
+            } else {
+                ThreatLevel::None
+            }
+        })
+        .collect()
+}

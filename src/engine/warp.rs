@@ -1,0 +1,288 @@
+//! Rendering the previous scan into the current scan's rays: the previous
+//! scan's surface (a triangle mesh over its range image) is moved by a motion
+//! model to each target ray's time and intersected with that ray. Sub-cell
+//! exact on planar surfaces, so the static road does not light up from
+//! discretisation; z-buffered, so the nearest surface wins.
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::grid::ImageGeometry;
+use super::surface::Surfaces;
+use super::trajectory::Trajectory;
+use crate::messages::StampNs;
+
+/// One scan's surface, ready to be warped.
+pub struct Source<'a> {
+    pub surfaces: &'a Surfaces,
+    /// Absolute time of each cell's return, ns (meaningful where range is set).
+    pub time_ns: &'a [StampNs],
+    /// Range noise (1 sigma), metres, for the same-surface test.
+    pub range_noise_m: f64,
+}
+
+/// The rays to render into.
+pub struct Target<'a> {
+    pub surfaces: &'a Surfaces,
+    /// Continuous (row, column) of each occupied cell's ray.
+    pub coords: &'a [(f32, f32)],
+    /// Median firing time of each column, ns (for a rolling sweep).
+    pub column_time_ns: &'a [StampNs],
+}
+
+/// The previous surface along each target ray.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// Range along the target ray, metres; NaN where no triangle covers it.
+    pub range_m: Vec<f32>,
+    /// Time the covering surface was measured at (interpolated), ns.
+    pub source_time_ns: Vec<StampNs>,
+    /// Unit normal of the covering triangle (zero where none).
+    pub normal: Vec<[f32; 3]>,
+    /// The covering triangle touches an occlusion edge of the source scan: the
+    /// ray may have seen another surface then (disocclusion).
+    pub edge: Vec<bool>,
+}
+
+/// Vertex of the warped mesh: position in the target frame, image coords, time.
+#[derive(Clone, Copy)]
+struct Vertex {
+    position: Point3<f64>,
+    row: f64,
+    col: f64,
+    time_ns: StampNs,
+}
+
+pub fn render(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    trajectory: &Trajectory,
+    scan_offset_ns: StampNs,
+) -> Rendered {
+    let cells = geometry.cells();
+    let vertices: Vec<Option<Vertex>> = (0..cells)
+        .into_par_iter()
+        .map(|cell| warp_vertex(source, target, geometry, trajectory, scan_offset_ns, cell))
+        .collect();
+    let candidates: Vec<Vec<Candidate>> = (0..geometry.rows.saturating_sub(1))
+        .into_par_iter()
+        .map(|row| rasterize_row(source, target, geometry, &vertices, row))
+        .collect();
+    let mut range_m = vec![f32::NAN; cells];
+    let mut source_time_ns = vec![0; cells];
+    let mut normal = vec![[0.0; 3]; cells];
+    let mut edge = vec![false; cells];
+    for row in candidates {
+        for candidate in row {
+            let cell = candidate.cell as usize;
+            if !(candidate.range_m >= range_m[cell]) {
+                range_m[cell] = candidate.range_m;
+                source_time_ns[cell] = candidate.time_ns;
+                normal[cell] = candidate.normal;
+                edge[cell] = candidate.edge;
+            }
+        }
+    }
+    Rendered {
+        range_m,
+        source_time_ns,
+        normal,
+        edge,
+    }
+}
+
+/// A triangle covering a target ray.
+struct Candidate {
+    cell: u32,
+    range_m: f32,
+    time_ns: StampNs,
+    normal: [f32; 3],
+    edge: bool,
+}
+
+fn warp_vertex(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    trajectory: &Trajectory,
+    scan_offset_ns: StampNs,
+    cell: usize,
+) -> Option<Vertex> {
+    let range = f64::from(source.surfaces.range_m[cell]);
+    if !range.is_finite() {
+        return None;
+    }
+    let d = source.surfaces.direction[cell];
+    let point = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * range;
+    let measured_ns = source.time_ns[cell];
+    // It will be seen again about one scan later; refine with the firing time
+    // of the column it lands in (a rolling sweep fires columns at different times).
+    let mut seen_ns = measured_ns + scan_offset_ns;
+    let mut moved = trajectory.relative(measured_ns, seen_ns) * point;
+    let col = geometry.col_of(moved.y.atan2(moved.x));
+    let column_ns = target.column_time_ns[col];
+    if column_ns != StampNs::MIN && column_ns != seen_ns {
+        seen_ns = column_ns;
+        moved = trajectory.relative(measured_ns, seen_ns) * point;
+    }
+    let azimuth = moved.y.atan2(moved.x);
+    let elevation = moved.z.atan2(moved.x.hypot(moved.y));
+    Some(Vertex {
+        position: moved,
+        row: geometry.row_f(elevation),
+        col: geometry.col_f(azimuth),
+        time_ns: measured_ns,
+    })
+}
+
+/// Whether two neighbouring source cells lie on one surface (so a triangle
+/// between them is real and not a bridge across an occlusion).
+fn same_surface(source: &Source, a: usize, b: usize) -> bool {
+    let s = source.surfaces;
+    let point = |c: usize| {
+        let d = s.direction[c];
+        Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * f64::from(s.range_m[c])
+    };
+    let (pa, pb) = (point(a), point(b));
+    let gap = pb - pa;
+    let tolerance = 4.0 * source.range_noise_m + 0.05 * gap.norm();
+    let off_plane = |c: usize, other: &Vector3<f64>| {
+        let n = s.normal[c];
+        let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+        (n.norm_squared() > 0.5).then(|| other.dot(&n).abs())
+    };
+    match (off_plane(a, &gap), off_plane(b, &gap)) {
+        // Each vertex must lie on the other's plane: a triangle across a crease
+        // (road meeting a wall) is a chamfer that is not there.
+        (Some(da), Some(db)) => da.max(db) <= tolerance,
+        // No plane: fall back to a range-ratio test.
+        _ => {
+            let (ra, rb) = (f64::from(s.range_m[a]), f64::from(s.range_m[b]));
+            (ra - rb).abs() <= 0.05 * ra.max(rb) + 4.0 * source.range_noise_m
+        }
+    }
+}
+
+/// The triangles between source rows `row` and `row + 1`, rasterised.
+fn rasterize_row(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    vertices: &[Option<Vertex>],
+    row: usize,
+) -> Vec<Candidate> {
+    let cols = geometry.cols;
+    let mut out = Vec::new();
+    for col in 0..cols {
+        let next = (col + 1) % cols;
+        let a = row * cols + col;
+        let b = row * cols + next;
+        let c = (row + 1) * cols + col;
+        let d = (row + 1) * cols + next;
+        for [i, j, k] in [[a, b, c], [b, d, c]] {
+            let (Some(vi), Some(vj), Some(vk)) = (vertices[i], vertices[j], vertices[k]) else {
+                continue;
+            };
+            if !(same_surface(source, i, j)
+                && same_surface(source, j, k)
+                && same_surface(source, i, k))
+            {
+                continue;
+            }
+            let edge =
+                source.surfaces.edge[i] || source.surfaces.edge[j] || source.surfaces.edge[k];
+            rasterize_triangle(target, geometry, [vi, vj, vk], edge, &mut out);
+        }
+    }
+    out
+}
+
+/// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
+const MAX_SPAN_CELLS: f64 = 24.0;
+
+fn rasterize_triangle(
+    target: &Target,
+    geometry: &ImageGeometry,
+    v: [Vertex; 3],
+    edge: bool,
+    out: &mut Vec<Candidate>,
+) {
+    let cols = geometry.cols as f64;
+    // Unwrap columns around the first vertex (the seam behind the sensor).
+    let unwrap = |c: f64| {
+        let mut c = c;
+        if c - v[0].col > cols / 2.0 {
+            c -= cols;
+        } else if v[0].col - c > cols / 2.0 {
+            c += cols;
+        }
+        c
+    };
+    let (r, c) = (
+        [v[0].row, v[1].row, v[2].row],
+        [v[0].col, unwrap(v[1].col), unwrap(v[2].col)],
+    );
+    let (r_min, r_max) = (r[0].min(r[1]).min(r[2]), r[0].max(r[1]).max(r[2]));
+    let (c_min, c_max) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+    if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
+        return;
+    }
+    let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
+    if denominator.abs() < 1e-12 {
+        return;
+    }
+    let normal = (v[1].position - v[0].position).cross(&(v[2].position - v[0].position));
+    let plane_offset = normal.dot(&v[0].position.coords);
+    let unit = normal / normal.norm().max(1e-300);
+    let row_lo = (r_min.floor().max(0.0)) as usize;
+    let row_hi = (r_max.ceil() as usize).min(geometry.rows - 1);
+    for row in row_lo..=row_hi {
+        for col_unwrapped in (c_min.floor() as i64)..=(c_max.ceil() as i64) {
+            let col = col_unwrapped.rem_euclid(geometry.cols as i64) as usize;
+            let cell = row * geometry.cols + col;
+            let direction = target.surfaces.direction[cell];
+            if !target.surfaces.range_m[cell].is_finite() {
+                continue;
+            }
+            let (tr, tc) = target.coords[cell];
+            let (tr, mut tc) = (f64::from(tr), f64::from(tc));
+            // Bring the target's column next to the triangle's.
+            if tc - c[0] > cols / 2.0 {
+                tc -= cols;
+            } else if c[0] - tc > cols / 2.0 {
+                tc += cols;
+            }
+            let w0 = ((r[1] - r[2]) * (tc - c[2]) + (c[2] - c[1]) * (tr - r[2])) / denominator;
+            let w1 = ((r[2] - r[0]) * (tc - c[2]) + (c[0] - c[2]) * (tr - r[2])) / denominator;
+            let w2 = 1.0 - w0 - w1;
+            const EDGE: f64 = -1e-9;
+            if w0 < EDGE || w1 < EDGE || w2 < EDGE {
+                continue;
+            }
+            let e = Vector3::new(
+                f64::from(direction[0]),
+                f64::from(direction[1]),
+                f64::from(direction[2]),
+            );
+            let along = normal.dot(&e);
+            if along.abs() < 1e-12 * normal.norm() {
+                continue;
+            }
+            let range = plane_offset / along;
+            if !(range > 0.0 && range.is_finite()) {
+                continue;
+            }
+            let time =
+                (w0 * v[0].time_ns as f64 + w1 * v[1].time_ns as f64 + w2 * v[2].time_ns as f64)
+                    .round() as StampNs;
+            out.push(Candidate {
+                cell: cell as u32,
+                range_m: range as f32,
+                time_ns: time,
+                normal: [unit.x as f32, unit.y as f32, unit.z as f32],
+                edge,
+            });
+        }
+    }
+}

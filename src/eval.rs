@@ -1,0 +1,538 @@
+//! `looming eval`: the engine's accuracy against ground truth. Reads a log that
+//! carries `/truth/points` (a synthetic drive, before or after `process`),
+//! pairs its scans like `process`, runs the engine and compares, per quantity
+//! and per class of cell, with the truth of the same points.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::decode::{self, DecodeLimits};
+use crate::engine::{self, EngineConfig, PairLooming};
+use crate::input::{Flow, InputFile, InputOptions, InputRecord};
+use crate::messages::{Decoded, Scan, StampNs};
+use crate::pairing::{PairEvent, PairingConfig, ScanPair, ScanPairer};
+use crate::ros::msgs::PointCloud2;
+use crate::topics::{Role, TopicOverrides, select};
+
+pub const TRUTH_POINTS_TOPIC: &str = "/truth/points";
+
+/// |own-motion looming| above which a truth cell counts as "moving
+/// observably": motion that changes the range along the ray.
+pub const OBSERVABLE_MOTION_PER_S: f64 = 0.1;
+
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(transparent)]
+    Input(#[from] crate::input::InputError),
+    #[error("{path}: {source}")]
+    Topic {
+        path: String,
+        source: crate::topics::TopicError,
+    },
+    #[error(
+        "{0}: no /truth/points channel: eval needs a log with ground truth (see `looming synth`)"
+    )]
+    NoTruth(String),
+    #[error("{0}")]
+    Truth(String),
+}
+
+/// Truth of one point (see docs/ground-truth.md).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PointTruth {
+    pub point_looming: f32,
+    pub ray_looming: f32,
+    pub own_motion_looming: f32,
+    pub incidence_cos: f32,
+    pub surface: u8,
+    pub moving: bool,
+}
+
+/// Decode a `/truth/points` cloud.
+pub fn decode_truth(payload: &[u8]) -> Result<(StampNs, Vec<PointTruth>), String> {
+    let cloud = PointCloud2::decode_cdr(payload).map_err(|e| e.to_string())?;
+    let field = |name: &str| {
+        cloud
+            .fields
+            .iter()
+            .find(|f| f.name == name)
+            .map(|f| f.offset as usize)
+            .ok_or_else(|| format!("/truth/points has no `{name}` field"))
+    };
+    let (pl, rl, om, ic, sf, mv) = (
+        field("point_looming")?,
+        field("ray_looming")?,
+        field("own_motion_looming")?,
+        field("incidence_cos")?,
+        field("surface")?,
+        field("moving")?,
+    );
+    let step = cloud.point_step as usize;
+    let count = (cloud.width as usize) * (cloud.height as usize);
+    if step == 0
+        || cloud.data.len() < count * step
+        || [pl, rl, om, ic].iter().any(|o| o + 4 > step)
+        || sf >= step
+        || mv >= step
+    {
+        return Err("/truth/points layout does not fit its data".into());
+    }
+    let f32_at = |base: usize, offset: usize| {
+        f32::from_le_bytes(
+            cloud.data[base + offset..base + offset + 4]
+                .try_into()
+                .expect("4 bytes"),
+        )
+    };
+    let points = (0..count)
+        .map(|i| {
+            let base = i * step;
+            PointTruth {
+                point_looming: f32_at(base, pl),
+                ray_looming: f32_at(base, rl),
+                own_motion_looming: f32_at(base, om),
+                incidence_cos: f32_at(base, ic),
+                surface: cloud.data[base + sf],
+                moving: cloud.data[base + mv] != 0,
+            }
+        })
+        .collect();
+    Ok((cloud.header.stamp.to_ns(), points))
+}
+
+/// Error statistics from a histogram of |error| (log-spaced bins: bounded memory
+/// however long the log) plus running sums.
+#[derive(Debug, Clone)]
+pub struct ErrorStats {
+    bins: Vec<u64>,
+    count: u64,
+    sum: f64,
+    sum_sq: f64,
+}
+
+const BINS_PER_DECADE: f64 = 200.0;
+const LOWEST: f64 = 1e-6;
+const DECADES: f64 = 9.0;
+
+impl Default for ErrorStats {
+    fn default() -> Self {
+        Self {
+            bins: vec![0; (BINS_PER_DECADE * DECADES) as usize + 2],
+            count: 0,
+            sum: 0.0,
+            sum_sq: 0.0,
+        }
+    }
+}
+
+impl ErrorStats {
+    pub fn add(&mut self, error: f64) {
+        if !error.is_finite() {
+            return;
+        }
+        let magnitude = error.abs();
+        let bin = if magnitude < LOWEST {
+            0
+        } else {
+            (((magnitude / LOWEST).log10() * BINS_PER_DECADE) as usize + 1).min(self.bins.len() - 1)
+        };
+        self.bins[bin] += 1;
+        self.count += 1;
+        self.sum += error;
+        self.sum_sq += error * error;
+    }
+
+    /// |error| below which a fraction `q` of the samples lie (bin upper edge).
+    pub fn quantile(&self, q: f64) -> f64 {
+        if self.count == 0 {
+            return f64::NAN;
+        }
+        let wanted = (q * self.count as f64).ceil() as u64;
+        let mut seen = 0;
+        for (bin, &n) in self.bins.iter().enumerate() {
+            seen += n;
+            if seen >= wanted.max(1) {
+                return if bin == 0 {
+                    LOWEST
+                } else {
+                    LOWEST * 10f64.powf(bin as f64 / BINS_PER_DECADE)
+                };
+            }
+        }
+        f64::INFINITY
+    }
+
+    pub fn summary(&self) -> Summary {
+        let n = self.count.max(1) as f64;
+        Summary {
+            count: self.count,
+            median_abs: self.quantile(0.5),
+            p90_abs: self.quantile(0.9),
+            bias: if self.count > 0 {
+                self.sum / n
+            } else {
+                f64::NAN
+            },
+            rmse: if self.count > 0 {
+                (self.sum_sq / n).sqrt()
+            } else {
+                f64::NAN
+            },
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Summary {
+    pub count: u64,
+    pub median_abs: f64,
+    pub p90_abs: f64,
+    pub bias: f64,
+    pub rmse: f64,
+}
+
+/// Classes of cells (by the truth of the cell's return and the engine's mask).
+pub const CLASSES: [&str; 6] = [
+    "static_road",
+    "static_facing",
+    "static_oblique",
+    "moving",
+    "all_unmasked",
+    "masked",
+];
+
+/// Moving-object detection counts over unmasked cells.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct Detection {
+    pub true_positive: u64,
+    pub false_positive: u64,
+    pub false_negative: u64,
+    pub true_negative: u64,
+    pub precision: f64,
+    pub recall: f64,
+    pub f1: f64,
+    /// Recall against every cell on an actor, observable motion or not.
+    pub recall_all_actor_cells: f64,
+}
+
+/// The report of `looming eval`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EvalReport {
+    pub file: String,
+    pub pairs: u64,
+    pub pairs_with_ego_velocity: u64,
+    pub config: EngineConfig,
+    /// quantity -> class -> stats. Quantities: l_lidar, l_ray_ego, fused (vs true
+    /// ray looming), disagreement (vs true own-motion looming), l_ego (vs true
+    /// point looming, per point), l_ego_relative (|error| / |truth|, static points).
+    pub errors: BTreeMap<String, BTreeMap<String, Summary>>,
+    pub moving_detection: Detection,
+    pub observable_motion_threshold_per_s: f64,
+}
+
+#[derive(Default)]
+struct Accumulator {
+    errors: BTreeMap<String, BTreeMap<String, ErrorStats>>,
+    detection: Detection,
+    actor_cells: u64,
+    actor_cells_flagged: u64,
+}
+
+impl Accumulator {
+    fn add(&mut self, quantity: &str, class: &str, error: f64) {
+        self.errors
+            .entry(quantity.to_string())
+            .or_default()
+            .entry(class.to_string())
+            .or_default()
+            .add(error);
+    }
+
+    fn add_pair(&mut self, scan: &Scan, result: &PairLooming, truth: &[PointTruth]) {
+        let truth_of = |point: usize| truth.get(scan.source_index[point] as usize).copied();
+        // Per point: L_ego against the true point looming.
+        if result.availability.ego_velocity {
+            for (point, &l_ego) in result.l_ego.iter().enumerate() {
+                let Some(t) = truth_of(point) else { continue };
+                if t.moving || !l_ego.is_finite() {
+                    continue;
+                }
+                let error = f64::from(l_ego) - f64::from(t.point_looming);
+                self.add("l_ego", "static_points", error);
+                if t.point_looming.abs() > 0.05 {
+                    self.add(
+                        "l_ego_relative",
+                        "static_points",
+                        error / f64::from(t.point_looming),
+                    );
+                }
+            }
+        }
+        for cell in 0..result.geometry.cells() {
+            let point = result.image.point[cell];
+            if point == engine::NO_POINT {
+                continue;
+            }
+            let Some(t) = truth_of(point as usize) else {
+                continue;
+            };
+            let masked = result.mask[cell] != 0;
+            let class = if masked {
+                "masked"
+            } else if t.moving {
+                "moving"
+            } else if t.surface == 0 {
+                "static_road"
+            } else if t.incidence_cos >= 0.5 {
+                "static_facing"
+            } else {
+                "static_oblique"
+            };
+            let truth_ray = f64::from(t.ray_looming);
+            let mut add = |quantity: &str, value: f32, truth: f64| {
+                if value.is_finite() {
+                    let error = f64::from(value) - truth;
+                    self.add(quantity, class, error);
+                    if !masked {
+                        self.add(quantity, "all_unmasked", error);
+                    }
+                }
+            };
+            if std::env::var_os("LOOMING_DEBUG").is_some()
+                && !masked
+                && (result.moving[cell]
+                    || (f64::from(result.l_lidar[cell]) - truth_ray).abs() > 0.3)
+            {
+                let p = scan.points_m[point as usize];
+                eprintln!(
+                    "DEBUG cell {cell} row {} col {} range {:.2} p {:?} surf {} inc {:.2} truth_ray {:.3} lidar {:.3} ray_ego {:.3} moving {} sigma {:.3} dt {:.4}",
+                    cell / result.geometry.cols,
+                    cell % result.geometry.cols,
+                    result.image.range_m[cell],
+                    p,
+                    t.surface,
+                    t.incidence_cos,
+                    truth_ray,
+                    result.l_lidar[cell],
+                    result.l_ray_ego[cell],
+                    result.moving[cell],
+                    result.sigma_per_s[cell],
+                    result.dt_s[cell]
+                );
+            }
+            add("l_lidar", result.l_lidar[cell], truth_ray);
+            add("fused", result.fused[cell], truth_ray);
+            if result.availability.ego_velocity {
+                add("l_ray_ego", result.l_ray_ego[cell], truth_ray);
+                add(
+                    "disagreement",
+                    result.disagreement[cell],
+                    f64::from(t.own_motion_looming),
+                );
+            }
+            if masked || !result.availability.ego_velocity {
+                continue;
+            }
+            let truly_moving = f64::from(t.own_motion_looming).abs() >= OBSERVABLE_MOTION_PER_S;
+            let flagged = result.moving[cell];
+            let d = &mut self.detection;
+            match (flagged, truly_moving) {
+                (true, true) => d.true_positive += 1,
+                (true, false) => d.false_positive += 1,
+                (false, true) => d.false_negative += 1,
+                (false, false) => d.true_negative += 1,
+            }
+            if t.moving {
+                self.actor_cells += 1;
+                self.actor_cells_flagged += u64::from(flagged);
+            }
+        }
+    }
+
+    fn finish(mut self) -> (BTreeMap<String, BTreeMap<String, Summary>>, Detection) {
+        let d = &mut self.detection;
+        let ratio = |a: u64, b: u64| {
+            if b == 0 {
+                f64::NAN
+            } else {
+                a as f64 / b as f64
+            }
+        };
+        d.precision = ratio(d.true_positive, d.true_positive + d.false_positive);
+        d.recall = ratio(d.true_positive, d.true_positive + d.false_negative);
+        d.f1 = 2.0 * d.precision * d.recall / (d.precision + d.recall);
+        d.recall_all_actor_cells = ratio(self.actor_cells_flagged, self.actor_cells);
+        let errors = self
+            .errors
+            .into_iter()
+            .map(|(q, classes)| {
+                (
+                    q,
+                    classes.into_iter().map(|(c, s)| (c, s.summary())).collect(),
+                )
+            })
+            .collect();
+        (errors, self.detection)
+    }
+}
+
+/// Evaluate the engine on `path` with `config`.
+pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalError> {
+    let input = InputFile::open(path, InputOptions::default())?;
+    let catalog = input.catalog().clone();
+    let truth_channel = catalog
+        .channels
+        .values()
+        .find(|c| c.topic == TRUTH_POINTS_TOPIC)
+        .map(|c| c.id)
+        .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
+    let topics =
+        select(&catalog, &TopicOverrides::default()).map_err(|source| EvalError::Topic {
+            path: path.display().to_string(),
+            source,
+        })?;
+    let selected: BTreeMap<u16, _> = topics.all().map(|c| (c.channel_id, c.clone())).collect();
+    let mut pairer = ScanPairer::new(PairingConfig {
+        has_velocity_source: topics.velocity.is_some(),
+        has_imu_source: topics.imu.is_some(),
+        ..PairingConfig::default()
+    });
+    pairer.set_nominal_period_s(catalog.nominal_period_s(topics.lidar.channel_id));
+    let limits = DecodeLimits::default();
+    let mut truths: BTreeMap<StampNs, Vec<PointTruth>> = BTreeMap::new();
+    let mut accumulator = Accumulator::default();
+    let (mut pairs, mut with_ego) = (0u64, 0u64);
+    let mut failure: Option<String> = None;
+    let mut handle = |events: Vec<PairEvent>,
+                      truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
+                      acc: &mut Accumulator| {
+        for event in events {
+            let PairEvent::Pair(pair) = event else {
+                continue;
+            };
+            evaluate_pair(&pair, config, truths, acc, &mut pairs, &mut with_ego);
+        }
+    };
+    input.read_records(false, &mut |record| {
+        let InputRecord::Message(message) = record else {
+            return Flow::Continue(());
+        };
+        if message.channel_id == truth_channel {
+            match decode_truth(&message.data) {
+                Ok((stamp, points)) => {
+                    truths.insert(stamp, points);
+                }
+                Err(e) => failure = Some(e),
+            }
+            return Flow::Continue(());
+        }
+        let Some(channel) = selected.get(&message.channel_id) else {
+            return Flow::Continue(());
+        };
+        let Ok(decoded) = decode::decode(
+            channel.kind,
+            channel.encoding,
+            channel.role == Role::TfStatic,
+            &message.data,
+            &limits,
+        ) else {
+            return Flow::Continue(());
+        };
+        let events = match decoded {
+            Decoded::Scan(scan) => pairer.push_scan(message.log_time_ns, Arc::new(scan)),
+            Decoded::Imu(s) => pairer.push_imu(message.log_time_ns, s),
+            Decoded::Velocity(s) => pairer.push_velocity(message.log_time_ns, s),
+            Decoded::Transforms {
+                transforms,
+                is_static,
+            } => {
+                pairer.push_transforms(&transforms, is_static);
+                Vec::new()
+            }
+        };
+        handle(events, &mut truths, &mut accumulator);
+        Flow::Continue(())
+    })?;
+    let events = pairer.finish();
+    handle(events, &mut truths, &mut accumulator);
+    if let Some(reason) = failure {
+        return Err(EvalError::Truth(reason));
+    }
+    let (errors, moving_detection) = accumulator.finish();
+    Ok(EvalReport {
+        file: path.display().to_string(),
+        pairs,
+        pairs_with_ego_velocity: with_ego,
+        config: config.clone(),
+        errors,
+        moving_detection,
+        observable_motion_threshold_per_s: OBSERVABLE_MOTION_PER_S,
+    })
+}
+
+fn evaluate_pair(
+    pair: &ScanPair,
+    config: &EngineConfig,
+    truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
+    accumulator: &mut Accumulator,
+    pairs: &mut u64,
+    with_ego: &mut u64,
+) {
+    let stamp = pair.current.stamp_ns;
+    // Truth of older scans is no longer needed: memory stays bounded.
+    let keep = truths.split_off(&pair.previous.stamp_ns);
+    *truths = keep;
+    let Some(truth) = truths.get(&stamp) else {
+        return;
+    };
+    let Some(result) = engine::compute(pair, config) else {
+        return;
+    };
+    *pairs += 1;
+    *with_ego += u64::from(result.availability.ego_velocity);
+    accumulator.add_pair(&pair.current, &result, truth);
+}
+
+impl EvalReport {
+    /// The human-readable tables.
+    pub fn to_text(&self) -> String {
+        use std::fmt::Write as _;
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{}: {} pairs ({} with ego velocity)",
+            self.file, self.pairs, self.pairs_with_ego_velocity
+        );
+        let _ = writeln!(
+            out,
+            "\n{:<16} {:<16} {:>9} {:>10} {:>10} {:>10} {:>10}",
+            "quantity", "class", "cells", "median|e|", "p90|e|", "bias", "rmse"
+        );
+        for (quantity, classes) in &self.errors {
+            for class in CLASSES.iter().chain(["static_points"].iter()) {
+                if let Some(s) = classes.get(*class) {
+                    let _ = writeln!(
+                        out,
+                        "{:<16} {:<16} {:>9} {:>10.4} {:>10.4} {:>10.4} {:>10.4}",
+                        quantity, class, s.count, s.median_abs, s.p90_abs, s.bias, s.rmse
+                    );
+                }
+            }
+        }
+        let d = &self.moving_detection;
+        let _ = writeln!(
+            out,
+            "\nmoving cells (|own-motion looming| >= {} 1/s, unmasked): precision {:.3} recall {:.3} F1 {:.3} (tp {} fp {} fn {}); recall over all actor cells {:.3}",
+            self.observable_motion_threshold_per_s,
+            d.precision,
+            d.recall,
+            d.f1,
+            d.true_positive,
+            d.false_positive,
+            d.false_negative,
+            d.recall_all_actor_cells
+        );
+        out
+    }
+}
