@@ -78,7 +78,7 @@ impl RangeImage {
             point_cell[index] = cell as u32;
             let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
             // Nearest return wins; ties keep the earlier point (deterministic).
-            if !(r >= range_m[cell]) {
+            if range_m[cell].is_nan() || r < range_m[cell] {
                 range_m[cell] = r;
                 point[cell] = index as u32;
             }

@@ -200,7 +200,7 @@ fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
         eigen.eigenvalues[order[2]],
     );
     // Collinear points (one row only) do not define a plane.
-    if !(largest > 0.0) || middle < 1e-3 * largest || !smallest.is_finite() {
+    if largest.is_nan() || largest <= 0.0 || middle < 1e-3 * largest || !smallest.is_finite() {
         return None;
     }
     let normal = eigen.eigenvectors.column(order[0]).into_owned();

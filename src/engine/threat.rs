@@ -20,7 +20,7 @@ pub enum ThreatLevel {
 impl ThreatLevel {
     /// Level of a looming value against `[low, medium, high]` times to contact (s).
     pub fn of(looming_per_s: f64, ttc_s: &[f64; 3]) -> Self {
-        if !(looming_per_s > 0.0) {
+        if looming_per_s.is_nan() || looming_per_s <= 0.0 {
             return ThreatLevel::None;
         }
         let ttc = 1.0 / looming_per_s;

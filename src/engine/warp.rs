@@ -76,7 +76,7 @@ pub fn render(
     for row in candidates {
         for candidate in row {
             let cell = candidate.cell as usize;
-            if !(candidate.range_m >= range_m[cell]) {
+            if range_m[cell].is_nan() || candidate.range_m < range_m[cell] {
                 range_m[cell] = candidate.range_m;
                 source_time_ns[cell] = candidate.time_ns;
                 normal[cell] = candidate.normal;
