@@ -54,6 +54,10 @@ pub struct EngineConfig {
     pub moving_min_per_s: f64,
     /// Cells whose surface is seen more obliquely than this (|n . e|) are masked.
     pub grazing_cos: f64,
+    /// Fastest plausible closing speed along a surface normal, m/s: a range
+    /// change beyond it between two scans means the ray met another surface
+    /// (occlusion or disocclusion), not motion.
+    pub max_closing_speed_mps: f64,
 }
 
 impl Default for EngineConfig {
@@ -67,6 +71,7 @@ impl Default for EngineConfig {
             moving_sigmas: 4.0,
             moving_min_per_s: 0.1,
             grazing_cos: 0.15,
+            max_closing_speed_mps: 30.0,
         }
     }
 }
@@ -83,6 +88,9 @@ pub mod mask {
     pub const GRAZING: u8 = 8;
     /// The ego-motion prediction has no surface here (only with a velocity source).
     pub const NO_EGO: u8 = 16;
+    /// The range changed faster than any plausible motion: the ray met another
+    /// surface in the previous scan (parallax at a silhouette, occlusion).
+    pub const OCCLUSION: u8 = 32;
 }
 
 /// What the engine could compute for a pair.
@@ -323,10 +331,15 @@ fn per_cell(
                     > (config.moving_sigmas * f64::from(r.sigma)).max(config.moving_min_per_s)
         })
         .collect();
-    // A moving object is a patch, not a lone noisy cell: keep candidates with a
-    // candidate neighbour.
+    // A moving object is a patch spanning beams, not a lone noisy cell nor a
+    // one-beam line (what the junction of road and wall leaves): keep
+    // candidates with two candidate neighbours, one of them on another beam.
     let moving: Vec<bool> = (0..geometry.cells())
-        .map(|cell| candidate[cell] && neighbours(geometry, cell).any(|n| candidate[n]))
+        .map(|cell| {
+            let row = cell / geometry.cols;
+            let flagged: Vec<usize> = neighbours(geometry, cell).filter(|&n| candidate[n]).collect();
+            candidate[cell] && flagged.len() >= 2 && flagged.iter().any(|&n| n / geometry.cols != row)
+        })
         .collect();
     let fused: Vec<f32> = (0..geometry.cells())
         .into_par_iter()
@@ -416,13 +429,11 @@ fn raw_cell(
             ..nan
         };
     }
-    let l_lidar = -(range_now - range_before) / (dt_s * range_now);
-    if std::env::var_os("LOOMING_DEBUG2").is_some() && l_lidar < -2.0 && flags == 0 {
-        eprintln!(
-            "DBG2 cell {cell} now {range_now:.2} before {range_before:.2} dt {dt_s:.4} n_now {:?} n_before {:?} dir {:?}",
-            current.normal[cell], rotated.normal[cell], current.direction[cell]
-        );
+    let incidence = f64::from(current.incidence_cos[cell]);
+    if (range_now - range_before).abs() * incidence > config.max_closing_speed_mps * dt_s {
+        flags |= mask::OCCLUSION;
     }
+    let l_lidar = -(range_now - range_before) / (dt_s * range_now);
     let l_ray_ego = match moved {
         Some(moved) => {
             let predicted = f64::from(moved.range_m[cell]);

@@ -139,7 +139,7 @@ fn fit_cell(
         };
     };
     // Points off the plane by more than noise belong to another surface.
-    let tolerance = 4.0 * params.range_noise_m + 0.01 * range;
+    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
     let on_plane: Vec<Vector3<f64>> = points
         .iter()
         .copied()
