@@ -343,7 +343,7 @@ fn per_cell(
         .collect();
     let fused: Vec<f32> = (0..geometry.cells())
         .into_par_iter()
-        .map(|cell| fuse(geometry, &raw, &moving, cell))
+        .map(|cell| fuse(geometry, &raw, &moving, candidate[cell], cell))
         .collect();
     let thresholds = config.threat_ttc_s;
     let threat = fused
@@ -487,21 +487,29 @@ fn neighbours(geometry: &ImageGeometry, cell: usize) -> impl Iterator<Item = usi
 
 /// The best estimate per cell: on the static world the ego prediction (exact
 /// up to the ego-motion error) weighed with the measurement by their noise; on
-/// moving cells the measurement, averaged over moving neighbours to cut its
-/// noise; without ego motion, the measurement.
-fn fuse(geometry: &ImageGeometry, raw: &[Raw], moving: &[bool], cell: usize) -> f32 {
+/// moving cells the measurement (median over moving neighbours); where the two
+/// disagree without forming a moving patch, the measurement; without ego
+/// motion, the measurement.
+fn fuse(geometry: &ImageGeometry, raw: &[Raw], moving: &[bool], disagrees: bool, cell: usize) -> f32 {
     let r = raw[cell];
     if !r.l_lidar.is_finite() {
         return f32::NAN;
     }
+    // A significant disagreement that is not part of a moving patch still
+    // says the static prediction is wrong here: keep the measurement.
+    if disagrees && !moving[cell] {
+        return r.l_lidar;
+    }
     if moving[cell] {
-        let (sum, count) = std::iter::once(cell)
+        // The median over the moving neighbours: less noise, and an edge cell
+        // with a wild value cannot drag it.
+        let mut values: Vec<f32> = std::iter::once(cell)
             .chain(neighbours(geometry, cell))
             .filter(|&n| moving[n] && raw[n].l_lidar.is_finite() && raw[n].mask == 0)
-            .fold((0.0f64, 0usize), |(s, c), n| {
-                (s + f64::from(raw[n].l_lidar), c + 1)
-            });
-        return (sum / count.max(1) as f64) as f32;
+            .map(|n| raw[n].l_lidar)
+            .collect();
+        values.sort_by(f32::total_cmp);
+        return values.get(values.len() / 2).copied().unwrap_or(r.l_lidar);
     }
     if !r.l_ray_ego.is_finite() {
         return r.l_lidar;
