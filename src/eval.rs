@@ -299,29 +299,6 @@ impl Accumulator {
                     }
                 }
             };
-            if std::env::var_os("LOOMING_DEBUG").is_some()
-                && !masked
-                && t.moving
-                && (f64::from(result.fused[cell]) - truth_ray).abs() > 0.3
-            {
-                let p = scan.points_m[point as usize];
-                eprintln!(
-                    "DEBUG cell {cell} row {} col {} range {:.2} p {:?} surf {} inc {:.2} truth_ray {:.3} lidar {:.3} ray_ego {:.3} moving {} sigma {:.3} dt {:.4} fused {}",
-                    cell / result.geometry.cols,
-                    cell % result.geometry.cols,
-                    result.image.range_m[cell],
-                    p,
-                    t.surface,
-                    t.incidence_cos,
-                    truth_ray,
-                    result.l_lidar[cell],
-                    result.l_ray_ego[cell],
-                    result.moving[cell],
-                    result.sigma_per_s[cell],
-                    result.dt_s[cell],
-                    result.fused[cell]
-                );
-            }
             add("l_lidar", result.l_lidar[cell], truth_ray);
             add("fused", result.fused[cell], truth_ray);
             if result.availability.ego_velocity {

@@ -69,7 +69,7 @@ impl Default for EngineConfig {
             // Autey 2012; Sacchi & Sayed 2016; Hayward 1972.
             threat_ttc_s: [3.0, 1.5, 1.0],
             moving_sigmas: 4.0,
-            moving_min_per_s: 0.1,
+            moving_min_per_s: 0.15,
             grazing_cos: 0.15,
             max_closing_speed_mps: 30.0,
         }
@@ -337,8 +337,10 @@ fn per_cell(
     let moving: Vec<bool> = (0..geometry.cells())
         .map(|cell| {
             let row = cell / geometry.cols;
-            let flagged: Vec<usize> = neighbours(geometry, cell).filter(|&n| candidate[n]).collect();
-            candidate[cell] && flagged.len() >= 2 && flagged.iter().any(|&n| n / geometry.cols != row)
+            let flagged: Vec<usize> = neighbours(geometry, cell)
+                .filter(|&n| candidate[n])
+                .collect();
+            candidate[cell] && flagged.iter().any(|&n| n / geometry.cols != row)
         })
         .collect();
     let fused: Vec<f32> = (0..geometry.cells())
@@ -490,7 +492,13 @@ fn neighbours(geometry: &ImageGeometry, cell: usize) -> impl Iterator<Item = usi
 /// moving cells the measurement (median over moving neighbours); where the two
 /// disagree without forming a moving patch, the measurement; without ego
 /// motion, the measurement.
-fn fuse(geometry: &ImageGeometry, raw: &[Raw], moving: &[bool], disagrees: bool, cell: usize) -> f32 {
+fn fuse(
+    geometry: &ImageGeometry,
+    raw: &[Raw],
+    moving: &[bool],
+    disagrees: bool,
+    cell: usize,
+) -> f32 {
     let r = raw[cell];
     if !r.l_lidar.is_finite() {
         return f32::NAN;
