@@ -255,10 +255,15 @@ impl Accumulator {
         if result.availability.ego_velocity {
             for (point, &l_ego) in result.l_ego.iter().enumerate() {
                 let Some(t) = truth_of(point) else { continue };
-                if t.moving || !l_ego.is_finite() {
+                if !l_ego.is_finite() {
                     continue;
                 }
                 let error = f64::from(l_ego) - f64::from(t.point_looming);
+                if t.moving {
+                    // L_ego treats moving objects as static: this is its blind spot.
+                    self.add("l_ego", "moving_points", error);
+                    continue;
+                }
                 self.add("l_ego", "static_points", error);
                 if t.point_looming.abs() > 0.05 {
                     self.add(
@@ -488,7 +493,10 @@ impl EvalReport {
             "quantity", "class", "cells", "median|e|", "p90|e|", "bias", "rmse"
         );
         for (quantity, classes) in &self.errors {
-            for class in CLASSES.iter().chain(["static_points"].iter()) {
+            for class in CLASSES
+                .iter()
+                .chain(["static_points", "moving_points"].iter())
+            {
                 if let Some(s) = classes.get(*class) {
                     let _ = writeln!(
                         out,

@@ -145,3 +145,60 @@ pub fn synthesize(options: &SynthOptions) -> Result<SynthSummary, SynthError> {
         elapsed_s: started.elapsed().as_secs_f64(),
     })
 }
+
+/// A scan pair straight from the simulator, with the exact LiDAR motion as its
+/// motion series (no MCAP round trip): for benchmarks and engine tests.
+pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::pairing::ScanPair {
+    use std::sync::Arc;
+
+    use crate::pairing::{AngularSource, PairMotion, TimeSeries};
+    let to_scan = |scan: &sensor::SimScan| crate::messages::Scan {
+        stamp_ns: messages::stamp_ns(scan.stamp_s),
+        frame_id: messages::LIDAR_FRAME.into(),
+        sensor_pose: nalgebra::Isometry3::identity(),
+        points_m: scan.points.iter().map(|p| p.point_m).collect(),
+        intensity: Some(scan.points.iter().map(|p| p.intensity).collect()),
+        ring: Some(scan.points.iter().map(|p| p.ring).collect()),
+        time_offset_s: Some(scan.points.iter().map(|p| p.time_s).collect()),
+        source_index: (0..scan.points.len() as u32).collect(),
+        input_point_count: scan.points.len() as u32,
+        skipped_invalid_points: 0,
+    };
+    let (previous, current) = (world.scan(index, seed), world.scan(index + 1, seed));
+    let (from_s, to_s) = (
+        previous.stamp_s - 0.05,
+        current.stamp_s + 2.0 * world.period_s,
+    );
+    let steps = ((to_s - from_s) / 0.005) as usize;
+    let (mut velocity, mut angular) = (Vec::new(), Vec::new());
+    for k in 0..=steps {
+        let t_s = from_s + k as f64 * 0.005;
+        let lidar = world.lidar_state(t_s);
+        velocity.push((
+            messages::stamp_ns(t_s),
+            lidar.to_lidar(&lidar.velocity_world_mps),
+        ));
+        angular.push((
+            messages::stamp_ns(t_s),
+            lidar.to_lidar(&lidar.angular_velocity_world_radps),
+        ));
+    }
+    crate::pairing::ScanPair {
+        dt_s: world.period_s,
+        previous_log_time_ns: 0,
+        current_log_time_ns: 0,
+        index,
+        motion: PairMotion {
+            velocity: Some(TimeSeries::new(velocity, 0.2)),
+            angular: Some(TimeSeries::new(angular, 0.2)),
+            angular_source: AngularSource::Imu,
+            velocity_extrinsic: None,
+            imu_extrinsic: None,
+            velocity_unavailable: false,
+            imu_unavailable: false,
+            coverage_complete: true,
+        },
+        previous: Arc::new(to_scan(&previous)),
+        current: Arc::new(to_scan(&current)),
+    }
+}
