@@ -62,9 +62,10 @@ fn main() {
         })
         .unwrap();
     let config = looming::engine::EngineConfig::default();
+    let mut cache = looming::engine::EngineCache::default();
     for pair in pairs.iter().take(5) {
         let started = Instant::now();
-        let result = looming::engine::compute(pair, &config).unwrap();
+        let result = looming::engine::compute_with_cache(pair, &config, &mut cache).unwrap();
         let points = pair.current.points_m.len();
         let elapsed = started.elapsed().as_secs_f64();
         println!(

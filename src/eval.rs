@@ -387,6 +387,7 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
     let mut accumulator = Accumulator::default();
     let (mut pairs, mut with_ego) = (0u64, 0u64);
     let mut failure: Option<String> = None;
+    let mut cache = engine::EngineCache::default();
     let mut handle = |events: Vec<PairEvent>,
                       truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
                       acc: &mut Accumulator| {
@@ -394,7 +395,15 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
             let PairEvent::Pair(pair) = event else {
                 continue;
             };
-            evaluate_pair(&pair, config, truths, acc, &mut pairs, &mut with_ego);
+            evaluate_pair(
+                &pair,
+                config,
+                &mut cache,
+                truths,
+                acc,
+                &mut pairs,
+                &mut with_ego,
+            );
         }
     };
     input.read_records(false, &mut |record| {
@@ -454,9 +463,11 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
     })
 }
 
+#[allow(clippy::too_many_arguments)]
 fn evaluate_pair(
     pair: &ScanPair,
     config: &EngineConfig,
+    cache: &mut engine::EngineCache,
     truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
     accumulator: &mut Accumulator,
     pairs: &mut u64,
@@ -469,7 +480,7 @@ fn evaluate_pair(
     let Some(truth) = truths.get(&stamp) else {
         return;
     };
-    let Some(result) = engine::compute(pair, config) else {
+    let Some(result) = engine::compute_with_cache(pair, config, cache) else {
         return;
     };
     *pairs += 1;

@@ -138,25 +138,104 @@ pub struct PairLooming {
     pub velocity_mps: Option<[f64; 3]>,
 }
 
+/// The gridded scan and its surfaces, kept from one pair to the next: the
+/// current scan of pair j is the previous scan of pair j+1.
+#[derive(Default)]
+pub struct EngineCache {
+    last: Option<CachedScan>,
+}
+
+struct CachedScan {
+    scan: std::sync::Arc<Scan>,
+    rows: usize,
+    cols: usize,
+    ring_to_row: Option<Vec<usize>>,
+    image: RangeImage,
+    surfaces: Surfaces,
+}
+
+impl CachedScan {
+    fn matches(&self, scan: &std::sync::Arc<Scan>, geometry: &ImageGeometry) -> bool {
+        std::sync::Arc::ptr_eq(&self.scan, scan)
+            && self.rows == geometry.rows
+            && self.cols == geometry.cols
+            && self.ring_to_row == geometry.ring_to_row
+            // Rows from elevation depend on the whole beam table.
+            && geometry.ring_to_row.is_some()
+    }
+}
+
 /// Run the engine on a pair. `None` when the scans give no usable image.
 pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
+    compute_with_cache(pair, config, &mut EngineCache::default())
+}
+
+/// [`compute`], reusing the previous scan's image and surfaces when the cache
+/// holds them (the same result, about a third less work on a stream of pairs).
+pub fn compute_with_cache(
+    pair: &ScanPair,
+    config: &EngineConfig,
+    cache: &mut EngineCache,
+) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = grid::geometry_for(previous, current, config.columns)?;
     let params = SurfaceParams {
         range_noise_m: config.range_noise_m,
     };
-    let (prev_image, cur_image) = rayon::join(
-        || RangeImage::build(previous, &geometry),
-        || RangeImage::build(current, &geometry),
+    let cached = cache
+        .last
+        .take()
+        .filter(|c| c.matches(&pair.previous, &geometry));
+    let ((prev_image, prev_surfaces), (cur_image, cur_surfaces)) = rayon::join(
+        || match cached {
+            Some(c) => (c.image, c.surfaces),
+            None => {
+                let image = RangeImage::build(previous, &geometry);
+                let surfaces = Surfaces::estimate(previous, &image, &geometry, params);
+                (image, surfaces)
+            }
+        },
+        || {
+            let image = RangeImage::build(current, &geometry);
+            let surfaces = Surfaces::estimate(current, &image, &geometry, params);
+            (image, surfaces)
+        },
     );
-    let (prev_surfaces, cur_surfaces) = rayon::join(
-        || Surfaces::estimate(previous, &prev_image, &geometry, params),
-        || Surfaces::estimate(current, &cur_image, &geometry, params),
+    let result = compute_from_surfaces(
+        pair,
+        config,
+        &geometry,
+        &prev_image,
+        &prev_surfaces,
+        &cur_image,
+        &cur_surfaces,
     );
-    let prev_time = cell_times(previous, &prev_image);
-    let cur_time = cell_times(current, &cur_image);
-    let coords = cell_coords(&cur_surfaces, &geometry);
-    let column_time = column_times(&cur_time, &cur_surfaces, &geometry);
+    cache.last = Some(CachedScan {
+        scan: pair.current.clone(),
+        rows: geometry.rows,
+        cols: geometry.cols,
+        ring_to_row: geometry.ring_to_row.clone(),
+        image: cur_image,
+        surfaces: cur_surfaces,
+    });
+    result
+}
+
+fn compute_from_surfaces(
+    pair: &ScanPair,
+    config: &EngineConfig,
+    geometry: &ImageGeometry,
+    prev_image: &RangeImage,
+    prev_surfaces: &Surfaces,
+    cur_image: &RangeImage,
+    cur_surfaces: &Surfaces,
+) -> Option<PairLooming> {
+    let (previous, current) = (&*pair.previous, &*pair.current);
+    let geometry = geometry.clone();
+    let prev_time = cell_times(previous, prev_image);
+    let cur_time = cell_times(current, cur_image);
+    let coords = cell_coords(cur_surfaces, &geometry);
+    let column_time = column_times(&cur_time, cur_surfaces, &geometry);
     let (start_ns, end_ns) = (
         previous.time_span_ns().0 - 1_000_000,
         current.time_span_ns().1 + 1_000_000,
@@ -178,12 +257,12 @@ pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
         end_ns,
     );
     let source = warp::Source {
-        surfaces: &prev_surfaces,
+        surfaces: prev_surfaces,
         time_ns: &prev_time,
         range_noise_m: config.range_noise_m,
     };
     let target = warp::Target {
-        surfaces: &cur_surfaces,
+        surfaces: cur_surfaces,
         coords: &coords,
         column_time_ns: &column_time,
     };
@@ -198,14 +277,14 @@ pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
     let cells = per_cell(
         config,
         &geometry,
-        &cur_surfaces,
+        cur_surfaces,
         &cur_time,
         &rotated,
         moved.as_ref(),
     );
     let velocity = pair.motion.velocity_at(current.stamp_ns);
     let l_ego = ego_looming(current, pair);
-    let point_threat = point_threats(current, &cur_image, &cells.threat);
+    let point_threat = point_threats(current, cur_image, &cells.threat);
     Some(PairLooming {
         availability: Availability {
             ego_velocity: full.is_some(),
@@ -214,7 +293,7 @@ pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
         spheres: velocity.map(|v| threat::spheres(&v, &config.threat_ttc_s)),
         velocity_mps: velocity.map(|v| [v.x, v.y, v.z]),
         point_cell: cur_image.point_cell.clone(),
-        image: cur_image,
+        image: cur_image.clone(),
         geometry,
         l_lidar: cells.l_lidar,
         l_ray_ego: cells.l_ray_ego,

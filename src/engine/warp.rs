@@ -4,7 +4,7 @@
 //! exact on planar surfaces, so the static road does not light up from
 //! discretisation; z-buffered, so the nearest surface wins.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
 use super::grid::ImageGeometry;
@@ -61,10 +61,33 @@ pub fn render(
     scan_offset_ns: StampNs,
 ) -> Rendered {
     let cells = geometry.cells();
-    let vertices: Vec<Option<Vertex>> = (0..cells)
+    // Column by column: the returns of one column share a firing time, so the
+    // relative transforms are computed once per column, not once per return.
+    let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
         .into_par_iter()
-        .map(|cell| warp_vertex(source, target, geometry, trajectory, scan_offset_ns, cell))
+        .map(|col| {
+            let mut cache = TransformCache::default();
+            (0..geometry.rows)
+                .map(|row| {
+                    warp_vertex(
+                        source,
+                        target,
+                        geometry,
+                        trajectory,
+                        scan_offset_ns,
+                        row * geometry.cols + col,
+                        &mut cache,
+                    )
+                })
+                .collect()
+        })
         .collect();
+    let mut vertices: Vec<Option<Vertex>> = vec![None; cells];
+    for (col, column) in columns.into_iter().enumerate() {
+        for (row, vertex) in column.into_iter().enumerate() {
+            vertices[row * geometry.cols + col] = vertex;
+        }
+    }
     let candidates: Vec<Vec<Candidate>> = (0..geometry.rows.saturating_sub(1))
         .into_par_iter()
         .map(|row| rasterize_row(source, target, geometry, &vertices, row))
@@ -101,6 +124,30 @@ struct Candidate {
     edge: bool,
 }
 
+/// The last relative transforms computed, keyed by (from, to) times.
+#[derive(Default)]
+struct TransformCache {
+    slots: [Option<((StampNs, StampNs), Isometry3<f64>)>; 4],
+    next: usize,
+}
+
+impl TransformCache {
+    fn get(&mut self, trajectory: &Trajectory, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
+        if let Some((_, transform)) = self
+            .slots
+            .iter()
+            .flatten()
+            .find(|(key, _)| *key == (from_ns, to_ns))
+        {
+            return *transform;
+        }
+        let transform = trajectory.relative(from_ns, to_ns);
+        self.slots[self.next] = Some(((from_ns, to_ns), transform));
+        self.next = (self.next + 1) % self.slots.len();
+        transform
+    }
+}
+
 fn warp_vertex(
     source: &Source,
     target: &Target,
@@ -108,6 +155,7 @@ fn warp_vertex(
     trajectory: &Trajectory,
     scan_offset_ns: StampNs,
     cell: usize,
+    cache: &mut TransformCache,
 ) -> Option<Vertex> {
     let range = f64::from(source.surfaces.range_m[cell]);
     if !range.is_finite() {
@@ -118,13 +166,12 @@ fn warp_vertex(
     let measured_ns = source.time_ns[cell];
     // It will be seen again about one scan later; refine with the firing time
     // of the column it lands in (a rolling sweep fires columns at different times).
-    let mut seen_ns = measured_ns + scan_offset_ns;
-    let mut moved = trajectory.relative(measured_ns, seen_ns) * point;
+    let seen_ns = measured_ns + scan_offset_ns;
+    let mut moved = cache.get(trajectory, measured_ns, seen_ns) * point;
     let col = geometry.col_of(moved.y.atan2(moved.x));
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
-        seen_ns = column_ns;
-        moved = trajectory.relative(measured_ns, seen_ns) * point;
+        moved = cache.get(trajectory, measured_ns, column_ns) * point;
     }
     let azimuth = moved.y.atan2(moved.x);
     let elevation = moved.z.atan2(moved.x.hypot(moved.y));
