@@ -124,10 +124,13 @@ struct Candidate {
     edge: bool,
 }
 
+/// A relative transform and the (from, to) times it was computed for.
+type CachedTransform = ((StampNs, StampNs), Isometry3<f64>);
+
 /// The last relative transforms computed, keyed by (from, to) times.
 #[derive(Default)]
 struct TransformCache {
-    slots: [Option<((StampNs, StampNs), Isometry3<f64>)>; 4],
+    slots: [Option<CachedTransform>; 4],
     next: usize,
 }
 
