@@ -174,6 +174,11 @@ fn warp_vertex(
     let col = geometry.col_of(moved.y.atan2(moved.x));
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
+        // A return that lands across the seam of the sweep would be compared
+        // with one fired a whole period earlier or later: no difference there.
+        if (column_ns - seen_ns).abs() > scan_offset_ns.abs() / 4 {
+            return None;
+        }
         moved = cache.get(trajectory, measured_ns, column_ns) * point;
     }
     let azimuth = moved.y.atan2(moved.x);
@@ -247,6 +252,10 @@ fn rasterize_row(
     }
     out
 }
+
+/// Largest firing-time spread within one triangle, ns (a triangle spans two
+/// columns: microseconds on any spinning sensor).
+const MAX_TRIANGLE_TIME_SPREAD_NS: StampNs = 10_000_000;
 
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
 const MAX_SPAN_CELLS: f64 = 24.0;

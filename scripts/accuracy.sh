@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The accuracy table of docs/method.md: synthesize the scenarios, run
+# `looming eval` on each, print one Markdown row per scenario.
+# Outside CI (about a minute). Usage: scripts/accuracy.sh [BEAMS COLUMNS]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+beams=${1:-32}
+columns=${2:-512}
+cargo build --release --quiet
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+echo "| scenario (${beams} x ${columns}) | window s | pairs | L_lidar median / p90 | D p90 static (road, facing, oblique) | L_ego rel. median | RMSE fused / L_lidar / L_ray_ego | moving P / R / F1 |"
+echo "|---|---|---|---|---|---|---|---|"
+for spec in "straight-road 0 2" "urban-turn 0 2" "follow 0 2" "cut-in 2 4" "crossing 3 5" "safe-drive 0 3"; do
+  set -- $spec
+  ./target/release/looming synth --scenario "$1" --start "$2" --duration "$3" --beams "$beams" --columns "$columns" -o "$out/$1.mcap" --force -q
+  ./target/release/looming eval "$out/$1.mcap" --json "$out/$1.json" > /dev/null
+  python3 - "$out/$1.json" "$1" "$2-$3" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+e = r["errors"]
+def s(q, c, k):
+    v = e.get(q, {}).get(c, {}).get(k)
+    return "-" if v is None else f"{v:.3f}"
+d = r["moving_detection"]
+f = lambda v: "-" if v is None or v != v else f"{v:.3f}"
+print(f"| {sys.argv[2]} | {sys.argv[3]} | {r['pairs']} | {s('l_lidar','all_unmasked','median_abs')} / {s('l_lidar','all_unmasked','p90_abs')} "
+      f"| {s('disagreement','static_road','p90_abs')}, {s('disagreement','static_facing','p90_abs')}, {s('disagreement','static_oblique','p90_abs')} "
+      f"| {float(e['l_ego_relative']['static_points']['median_abs'])*100:.2f} % "
+      f"| {s('fused','all_unmasked','rmse')} / {s('l_lidar','all_unmasked','rmse')} / {s('l_ray_ego','all_unmasked','rmse')} "
+      f"| {f(d['precision'])} / {f(d['recall'])} / {f(d['f1'])} |")
+PY
+done
