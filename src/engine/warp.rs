@@ -253,10 +253,6 @@ fn rasterize_row(
     out
 }
 
-/// Largest firing-time spread within one triangle, ns (a triangle spans two
-/// columns: microseconds on any spinning sensor).
-const MAX_TRIANGLE_TIME_SPREAD_NS: StampNs = 10_000_000;
-
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
 const MAX_SPAN_CELLS: f64 = 24.0;
 
