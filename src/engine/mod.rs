@@ -179,9 +179,7 @@ pub fn compute_with_cache(
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = grid::geometry_for(previous, current, config.columns)?;
-    let params = SurfaceParams {
-        range_noise_m: config.range_noise_m,
-    };
+    let params = SurfaceParams::for_geometry(&geometry, config.range_noise_m);
     let cached = cache
         .last
         .take()
@@ -518,6 +516,14 @@ fn raw_cell(
     let l_ray_ego = match moved {
         Some(moved) => {
             let predicted = f64::from(moved.range_m[cell]);
+            // The static prediction must be the surface seen now, moved by at
+            // most what an object's own motion allows: else it is the ghost of
+            // an object that has moved away (or an occlusion), not a difference.
+            if predicted.is_finite()
+                && (predicted - range_now).abs() * incidence > config.max_closing_speed_mps * dt_s
+            {
+                flags |= mask::OCCLUSION;
+            }
             if predicted.is_finite() {
                 // The measured range as reference: on a plane the predicted
                 // displacement is the same at any range, so this is the static

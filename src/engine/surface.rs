@@ -31,6 +31,28 @@ pub struct Surfaces {
 pub struct SurfaceParams {
     /// Range noise of the sensor (1 sigma), metres.
     pub range_noise_m: f64,
+    /// Columns on each side of a cell in its fitting window: the window spans
+    /// 3 beams and about as much azimuth as elevation, so a dense sensor (2048
+    /// columns) does not fit planes to points a few centimetres apart.
+    pub half_cols: usize,
+}
+
+impl SurfaceParams {
+    pub fn for_geometry(geometry: &ImageGeometry, range_noise_m: f64) -> Self {
+        let elevations = &geometry.beams.elevations_rad;
+        let row_step = match (elevations.first(), elevations.last()) {
+            (Some(lo), Some(hi)) if elevations.len() > 1 => {
+                (hi - lo) / (elevations.len() - 1) as f64
+            }
+            _ => 0.0,
+        };
+        let col_step = std::f64::consts::TAU / geometry.cols as f64;
+        let half_cols = (row_step / col_step).round().clamp(1.0, 4.0) as usize;
+        Self {
+            range_noise_m,
+            half_cols,
+        }
+    }
 }
 
 impl Surfaces {
@@ -83,10 +105,15 @@ fn point_of(scan: &Scan, image: &RangeImage, cell: usize) -> Option<Vector3<f64>
 }
 
 /// The 8 neighbours of a cell (columns wrap around, rows do not).
-fn neighbours(geometry: &ImageGeometry, cell: usize) -> impl Iterator<Item = usize> + '_ {
+fn neighbours(
+    geometry: &ImageGeometry,
+    cell: usize,
+    half_cols: usize,
+) -> impl Iterator<Item = usize> + '_ {
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    let half = half_cols as i64;
     (-1i64..=1).flat_map(move |dr| {
-        (-1i64..=1).filter_map(move |dc| {
+        (-half..=half).filter_map(move |dc| {
             if dr == 0 && dc == 0 {
                 return None;
             }
@@ -120,10 +147,10 @@ fn fit_cell(
         ..EMPTY
     };
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
-    let mut points: Vec<Vector3<f64>> = Vec::with_capacity(9);
+    let mut points: Vec<Vector3<f64>> = Vec::with_capacity(3 * (2 * params.half_cols + 1));
     points.push(center);
     let mut far_neighbour = false;
-    for n in neighbours(geometry, cell) {
+    for n in neighbours(geometry, cell, params.half_cols) {
         if let Some(p) = point_of(scan, image, n) {
             if (p.norm() - range).abs() <= 0.3 * range + 0.5 {
                 points.push(p);
@@ -132,7 +159,7 @@ fn fit_cell(
             }
         }
     }
-    let Some((normal, centroid)) = fit_plane(&points) else {
+    let Some((normal, centroid, _)) = fit_plane_spread(&points) else {
         return CellSurface {
             edge: far_neighbour,
             ..raw
@@ -149,8 +176,8 @@ fn fit_cell(
     let (normal, centroid, support) = if on_plane.len() == points.len() {
         (normal, centroid, points.len())
     } else {
-        match fit_plane(&on_plane) {
-            Some((n, c)) => (n, c, on_plane.len()),
+        match fit_plane_spread(&on_plane) {
+            Some((n, c, _)) => (n, c, on_plane.len()),
             None => return CellSurface { edge, ..raw },
         }
     };
@@ -181,7 +208,14 @@ fn fit_cell(
 
 /// Least-squares plane: unit normal and centroid; None for fewer than 4 points
 /// or points along a line.
+#[cfg(test)]
 fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    fit_plane_spread(points).map(|(n, c, _)| (n, c))
+}
+
+/// [`fit_plane`] plus the RMS spread of the points within the plane (the
+/// smaller in-plane axis).
+fn fit_plane_spread(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
     if points.len() < 4 {
         return None;
     }
@@ -197,7 +231,11 @@ fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
         return None;
     }
     let normal = null_vector(&(covariance - Matrix3::identity() * smallest))?;
-    Some((normal, centroid))
+    Some((
+        normal,
+        centroid,
+        (middle.max(0.0) / points.len() as f64).sqrt(),
+    ))
 }
 
 /// Eigenvalues of a symmetric 3x3 matrix, ascending, in closed form (the
