@@ -5,15 +5,13 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::Arc;
 
-use crate::decode::{self, DecodeLimits};
 use crate::engine::{self, EngineConfig, PairLooming};
-use crate::input::{Flow, InputFile, InputOptions, InputRecord};
-use crate::messages::{Decoded, Scan, StampNs};
-use crate::pairing::{PairEvent, PairingConfig, ScanPair, ScanPairer};
+use crate::input::{InputFile, InputOptions};
+use crate::messages::{Scan, StampNs};
+use crate::pairing::ScanPair;
+use crate::replay::{ReplayError, replay};
 use crate::ros::msgs::PointCloud2;
-use crate::topics::{Role, TopicOverrides, select};
 
 pub const TRUTH_POINTS_TOPIC: &str = "/truth/points";
 
@@ -363,91 +361,49 @@ impl Accumulator {
 /// Evaluate the engine on `path` with `config`.
 pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalError> {
     let input = InputFile::open(path, InputOptions::default())?;
-    let catalog = input.catalog().clone();
-    let truth_channel = catalog
+    let truth_channel = input
+        .catalog()
         .channels
         .values()
         .find(|c| c.topic == TRUTH_POINTS_TOPIC)
         .map(|c| c.id)
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
-    let topics =
-        select(&catalog, &TopicOverrides::default()).map_err(|source| EvalError::Topic {
-            path: path.display().to_string(),
-            source,
-        })?;
-    let selected: BTreeMap<u16, _> = topics.all().map(|c| (c.channel_id, c.clone())).collect();
-    let mut pairer = ScanPairer::new(PairingConfig {
-        has_velocity_source: topics.velocity.is_some(),
-        has_imu_source: topics.imu.is_some(),
-        ..PairingConfig::default()
-    });
-    pairer.set_nominal_period_s(catalog.nominal_period_s(topics.lidar.channel_id));
-    let limits = DecodeLimits::default();
-    let mut truths: BTreeMap<StampNs, Vec<PointTruth>> = BTreeMap::new();
+    drop(input);
+    // Truth arrives with its scan, before the pair that reports on it.
+    let truths = std::cell::RefCell::new(BTreeMap::<StampNs, Vec<PointTruth>>::new());
+    let mut failure: Option<String> = None;
     let mut accumulator = Accumulator::default();
     let (mut pairs, mut with_ego) = (0u64, 0u64);
-    let mut failure: Option<String> = None;
     let mut cache = engine::EngineCache::default();
-    let mut handle = |events: Vec<PairEvent>,
-                      truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
-                      acc: &mut Accumulator| {
-        for event in events {
-            let PairEvent::Pair(pair) = event else {
-                continue;
-            };
+    replay(
+        path,
+        &mut |message| {
+            if message.channel_id == truth_channel {
+                match decode_truth(&message.data) {
+                    Ok((stamp, points)) => {
+                        truths.borrow_mut().insert(stamp, points);
+                    }
+                    Err(e) => failure = Some(e),
+                }
+            }
+        },
+        &mut |pair| {
+            let mut truths = truths.borrow_mut();
             evaluate_pair(
                 &pair,
                 config,
                 &mut cache,
-                truths,
-                acc,
+                &mut truths,
+                &mut accumulator,
                 &mut pairs,
                 &mut with_ego,
             );
-        }
-    };
-    input.read_records(false, &mut |record| {
-        let InputRecord::Message(message) = record else {
-            return Flow::Continue(());
-        };
-        if message.channel_id == truth_channel {
-            match decode_truth(&message.data) {
-                Ok((stamp, points)) => {
-                    truths.insert(stamp, points);
-                }
-                Err(e) => failure = Some(e),
-            }
-            return Flow::Continue(());
-        }
-        let Some(channel) = selected.get(&message.channel_id) else {
-            return Flow::Continue(());
-        };
-        let Ok(decoded) = decode::decode(
-            channel.kind,
-            channel.encoding,
-            channel.role == Role::TfStatic,
-            &message.data,
-            &limits,
-        ) else {
-            return Flow::Continue(());
-        };
-        let events = match decoded {
-            Decoded::Scan(scan) => pairer.push_scan(message.log_time_ns, Arc::new(scan)),
-            Decoded::Imu(s) => pairer.push_imu(message.log_time_ns, s),
-            Decoded::Velocity(s) => pairer.push_velocity(message.log_time_ns, s),
-            Decoded::Transforms {
-                transforms,
-                is_static,
-            } => {
-                pairer.push_transforms(&transforms, is_static);
-                Vec::new()
-            }
-        };
-        handle(events, &mut truths, &mut accumulator);
-        Flow::Continue(())
+        },
+    )
+    .map_err(|e| match e {
+        ReplayError::Input(e) => EvalError::Input(e),
+        ReplayError::Topic { path, source } => EvalError::Topic { path, source },
     })?;
-    let events = pairer.finish();
-    handle(events, &mut truths, &mut accumulator);
     if let Some(reason) = failure {
         return Err(EvalError::Truth(reason));
     }

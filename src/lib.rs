@@ -15,6 +15,7 @@ pub mod messages;
 pub mod output;
 pub mod pairing;
 pub mod pipeline;
+pub mod replay;
 pub mod ros;
 pub mod ros_schemas;
 pub mod synth;

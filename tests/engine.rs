@@ -137,3 +137,45 @@ fn the_engine_is_deterministic() {
     let b = serde_json::to_string(&evaluate(&path, &config).unwrap()).unwrap();
     assert_eq!(a, b);
 }
+
+#[test]
+fn eval_runs_through_the_cli_and_refuses_logs_without_truth() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let json = std::env::temp_dir().join(format!("looming-eval-{}.json", std::process::id()));
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_looming"))
+        .args([
+            "eval",
+            root.join("sample_logs/cut-in.mcap").to_str().unwrap(),
+            "--json",
+            json.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(text.contains("l_lidar") && text.contains("F1"), "{text}");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert!(report["moving_detection"]["f1"].as_f64().unwrap() > 0.95);
+    let _ = std::fs::remove_file(&json);
+
+    // A log without /truth/points: a clear error, not a report.
+    let dir = std::env::temp_dir().join(format!("looming-eval-notruth-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("plain.mcap");
+    std::fs::write(
+        &log,
+        looming::fixtures::drive_log(&looming::fixtures::DriveSpec::default()),
+    )
+    .unwrap();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_looming"))
+        .args(["eval", log.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("/truth/points"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

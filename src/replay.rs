@@ -1,0 +1,88 @@
+//! Replaying a log into scan pairs on the calling thread, without writing
+//! anything: what `eval`, benchmarks and tools need (`process` runs the same
+//! stages on threads, see `pipeline`).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::decode::{self, DecodeLimits};
+use crate::input::{Flow, InputError, InputFile, InputMessage, InputOptions, InputRecord};
+use crate::messages::Decoded;
+use crate::pairing::{PairEvent, PairingConfig, ScanPair, ScanPairer};
+use crate::topics::{Role, TopicError, TopicOverrides, select};
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Input(#[from] InputError),
+    #[error("{path}: {source}")]
+    Topic { path: String, source: TopicError },
+}
+
+/// Read `path` in log-time order with auto-detected topics: every message goes
+/// to `on_message` (before decoding), every scan pair to `on_pair`. Messages
+/// that fail to decode are skipped.
+pub fn replay(
+    path: &Path,
+    on_message: &mut dyn FnMut(&InputMessage),
+    on_pair: &mut dyn FnMut(ScanPair),
+) -> Result<(), ReplayError> {
+    let input = InputFile::open(path, InputOptions::default())?;
+    let catalog = input.catalog().clone();
+    let topics =
+        select(&catalog, &TopicOverrides::default()).map_err(|source| ReplayError::Topic {
+            path: path.display().to_string(),
+            source,
+        })?;
+    let selected: std::collections::BTreeMap<u16, _> =
+        topics.all().map(|c| (c.channel_id, c.clone())).collect();
+    let mut pairer = ScanPairer::new(PairingConfig {
+        has_velocity_source: topics.velocity.is_some(),
+        has_imu_source: topics.imu.is_some(),
+        ..PairingConfig::default()
+    });
+    pairer.set_nominal_period_s(catalog.nominal_period_s(topics.lidar.channel_id));
+    let limits = DecodeLimits::default();
+    let deliver = |events: Vec<PairEvent>, on_pair: &mut dyn FnMut(ScanPair)| {
+        for event in events {
+            if let PairEvent::Pair(pair) = event {
+                on_pair(pair);
+            }
+        }
+    };
+    input.read_records(false, &mut |record| {
+        let InputRecord::Message(message) = record else {
+            return Flow::Continue(());
+        };
+        on_message(&message);
+        let Some(channel) = selected.get(&message.channel_id) else {
+            return Flow::Continue(());
+        };
+        let is_static = channel.role == Role::TfStatic;
+        let Ok(decoded) = decode::decode(
+            channel.kind,
+            channel.encoding,
+            is_static,
+            &message.data,
+            &limits,
+        ) else {
+            return Flow::Continue(());
+        };
+        let events = match decoded {
+            Decoded::Scan(scan) => pairer.push_scan(message.log_time_ns, Arc::new(scan)),
+            Decoded::Imu(sample) => pairer.push_imu(message.log_time_ns, sample),
+            Decoded::Velocity(sample) => pairer.push_velocity(message.log_time_ns, sample),
+            Decoded::Transforms {
+                transforms,
+                is_static,
+            } => {
+                pairer.push_transforms(&transforms, is_static);
+                Vec::new()
+            }
+        };
+        deliver(events, on_pair);
+        Flow::Continue(())
+    })?;
+    deliver(pairer.finish(), on_pair);
+    Ok(())
+}
