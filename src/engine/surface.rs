@@ -108,11 +108,13 @@ fn point_of(scan: &Scan, image: &RangeImage, cell: usize) -> Option<Vector3<f64>
 fn neighbours(
     geometry: &ImageGeometry,
     cell: usize,
+    half_rows: usize,
     half_cols: usize,
 ) -> impl Iterator<Item = usize> + '_ {
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
     let half = half_cols as i64;
-    (-1i64..=1).flat_map(move |dr| {
+    let half_rows = half_rows as i64;
+    (-half_rows..=half_rows).flat_map(move |dr| {
         (-half..=half).filter_map(move |dc| {
             if dr == 0 && dc == 0 {
                 return None;
@@ -127,6 +129,9 @@ fn neighbours(
     })
 }
 
+/// Fit the cell's plane in its window; where the window's points spread over
+/// less than a few noise sigmas in the plane (a close object seen by a dense
+/// sensor) the normal would be mostly noise, so the window grows (up to 7 beams).
 fn fit_cell(
     scan: &Scan,
     image: &RangeImage,
@@ -134,8 +139,30 @@ fn fit_cell(
     cell: usize,
     params: SurfaceParams,
 ) -> CellSurface {
+    let mut best = EMPTY;
+    for grow in 1..=3 {
+        let (surface, spread) = fit_window(scan, image, geometry, cell, params, grow, grow * params.half_cols);
+        best = surface;
+        if spread.is_none_or(|s| s >= 2.0 * params.range_noise_m) {
+            break;
+        }
+    }
+    best
+}
+
+/// One fit over a window of `2 half_rows + 1` beams by `2 half_cols + 1`
+/// columns; also returns the in-plane spread of the points fitted.
+fn fit_window(
+    scan: &Scan,
+    image: &RangeImage,
+    geometry: &ImageGeometry,
+    cell: usize,
+    params: SurfaceParams,
+    half_rows: usize,
+    half_cols: usize,
+) -> (CellSurface, Option<f64>) {
     let Some(center) = point_of(scan, image, cell) else {
-        return EMPTY;
+        return (EMPTY, None);
     };
     let range = center.norm();
     let direction = center / range;
@@ -147,10 +174,10 @@ fn fit_cell(
         ..EMPTY
     };
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
-    let mut points: Vec<Vector3<f64>> = Vec::with_capacity(3 * (2 * params.half_cols + 1));
+    let mut points: Vec<Vector3<f64>> = Vec::with_capacity((2 * half_rows + 1) * (2 * half_cols + 1));
     points.push(center);
     let mut far_neighbour = false;
-    for n in neighbours(geometry, cell, params.half_cols) {
+    for n in neighbours(geometry, cell, half_rows, half_cols) {
         if let Some(p) = point_of(scan, image, n) {
             if (p.norm() - range).abs() <= 0.3 * range + 0.5 {
                 points.push(p);
@@ -159,11 +186,14 @@ fn fit_cell(
             }
         }
     }
-    let Some((normal, centroid, _)) = fit_plane_spread(&points) else {
-        return CellSurface {
-            edge: far_neighbour,
-            ..raw
-        };
+    let Some((normal, centroid, spread)) = fit_plane_spread(&points) else {
+        return (
+            CellSurface {
+                edge: far_neighbour,
+                ..raw
+            },
+            None,
+        );
     };
     // Points off the plane by more than noise belong to another surface.
     let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
@@ -173,12 +203,12 @@ fn fit_cell(
         .filter(|p| (p - centroid).dot(&normal).abs() <= tolerance)
         .collect();
     let edge = far_neighbour || on_plane.len() < points.len();
-    let (normal, centroid, support) = if on_plane.len() == points.len() {
-        (normal, centroid, points.len())
+    let (normal, centroid, support, spread) = if on_plane.len() == points.len() {
+        (normal, centroid, points.len(), spread)
     } else {
         match fit_plane_spread(&on_plane) {
-            Some((n, c, _)) => (n, c, on_plane.len()),
-            None => return CellSurface { edge, ..raw },
+            Some((n, c, s)) => (n, c, on_plane.len(), s),
+            None => return (CellSurface { edge, ..raw }, None),
         }
     };
     let facing = normal.dot(&direction);
@@ -196,14 +226,15 @@ fn fit_cell(
     } else {
         range
     };
-    CellSurface {
+    let surface = CellSurface {
         range_m: range_m as f32,
         direction: as_f32(&direction),
         normal: as_f32(&normal),
         incidence_cos: incidence_cos as f32,
         support: support.min(255) as u8,
         edge,
-    }
+    };
+    (surface, Some(spread))
 }
 
 /// Least-squares plane: unit normal and centroid; None for fewer than 4 points
