@@ -420,9 +420,29 @@ fn per_cell(
             candidate[cell] && flagged.iter().any(|&n| n / geometry.cols != row)
         })
         .collect();
-    let fused: Vec<f32> = (0..geometry.cells())
+    let pointwise: Vec<f32> = (0..geometry.cells())
         .into_par_iter()
         .map(|cell| fuse(geometry, &raw, &moving, candidate[cell], cell))
+        .collect();
+    // On the static world neighbouring cells see one smooth looming field: a
+    // 3x3 median over trusted static neighbours removes what noise is left
+    // without blurring across edges (masked and moving cells take no part).
+    let trusted_static =
+        |n: usize| raw[n].mask == 0 && !moving[n] && !candidate[n] && pointwise[n].is_finite();
+    let fused: Vec<f32> = (0..geometry.cells())
+        .into_par_iter()
+        .map(|cell| {
+            if !trusted_static(cell) {
+                return pointwise[cell];
+            }
+            let mut values: Vec<f32> = std::iter::once(cell)
+                .chain(neighbours(geometry, cell))
+                .filter(|&n| trusted_static(n))
+                .map(|n| pointwise[n])
+                .collect();
+            values.sort_by(f32::total_cmp);
+            values[values.len() / 2]
+        })
         .collect();
     let thresholds = config.threat_ttc_s;
     let threat = fused
@@ -588,10 +608,14 @@ fn fuse(
     if !r.l_lidar.is_finite() {
         return f32::NAN;
     }
-    // A significant disagreement that is not part of a moving patch still
-    // says the static prediction is wrong here: keep the measurement.
+    // A significant disagreement outside any moving patch is either a small
+    // mover or an artefact of one of the two: neither is to be trusted alone.
     if disagrees && !moving[cell] {
-        return r.l_lidar;
+        return if r.l_ray_ego.is_finite() {
+            0.5 * (r.l_lidar + r.l_ray_ego)
+        } else {
+            r.l_lidar
+        };
     }
     if moving[cell] {
         // The median over the moving neighbours: less noise, and an edge cell

@@ -141,7 +141,15 @@ fn fit_cell(
 ) -> CellSurface {
     let mut best = EMPTY;
     for grow in 1..=3 {
-        let (surface, spread) = fit_window(scan, image, geometry, cell, params, grow, grow * params.half_cols);
+        let (surface, spread) = fit_window(
+            scan,
+            image,
+            geometry,
+            cell,
+            params,
+            grow,
+            grow * params.half_cols,
+        );
         best = surface;
         if spread.is_none_or(|s| s >= 2.0 * params.range_noise_m) {
             break;
@@ -174,7 +182,8 @@ fn fit_window(
         ..EMPTY
     };
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
-    let mut points: Vec<Vector3<f64>> = Vec::with_capacity((2 * half_rows + 1) * (2 * half_cols + 1));
+    let mut points: Vec<Vector3<f64>> =
+        Vec::with_capacity((2 * half_rows + 1) * (2 * half_cols + 1));
     points.push(center);
     let mut far_neighbour = false;
     for n in neighbours(geometry, cell, half_rows, half_cols) {
