@@ -19,15 +19,15 @@ for spec in "straight-road 0 2" "urban-turn 0 2" "follow 0 2" "cut-in 2 4" "cros
 import json, sys
 r = json.load(open(sys.argv[1]))
 e = r["errors"]
-def s(q, c, k):
+def s(q, c, k, digits=3):
     v = e.get(q, {}).get(c, {}).get(k)
-    return "-" if v is None else f"{v:.3f}"
+    return "-" if v is None else f"{v:.{digits}f}"
 d = r["moving_detection"]
 f = lambda v: "-" if v is None or v != v else f"{v:.3f}"
 print(f"| {sys.argv[2]} | {sys.argv[3]} | {r['pairs']} | {s('l_lidar','all_unmasked','median_abs')} / {s('l_lidar','all_unmasked','p90_abs')} "
       f"| {s('disagreement','static_road','p90_abs')}, {s('disagreement','static_facing','p90_abs')}, {s('disagreement','static_oblique','p90_abs')} "
       f"| {float(e['l_ego_relative']['static_points']['median_abs'])*100:.2f} % "
-      f"| {s('fused','all_unmasked','rmse')} / {s('l_lidar','all_unmasked','rmse')} / {s('l_ray_ego','all_unmasked','rmse')} "
+      f"| {s('fused','all_unmasked','rmse',4)} / {s('l_lidar','all_unmasked','rmse',4)} / {s('l_ray_ego','all_unmasked','rmse',4)} "
       f"| {f(d['precision'])} / {f(d['recall'])} / {f(d['f1'])} |")
 PY
 done
