@@ -435,8 +435,15 @@ fn per_cell(
             if !trusted_static(cell) {
                 return pointwise[cell];
             }
+            // Only neighbours on the same surface (parallel planes): the base
+            // of an object is not smoothed into the road it stands on.
+            let normal = current.normal[cell];
+            let same_surface = |n: usize| {
+                let m = current.normal[n];
+                normal[0] * m[0] + normal[1] * m[1] + normal[2] * m[2] > 0.95
+            };
             let mut values: Vec<f32> = std::iter::once(cell)
-                .chain(neighbours(geometry, cell))
+                .chain(neighbours(geometry, cell).filter(|&n| same_surface(n)))
                 .filter(|&n| trusted_static(n))
                 .map(|n| pointwise[n])
                 .collect();
