@@ -209,3 +209,24 @@ fn moving_objects_are_found_at_full_resolution_too() {
         );
     }
 }
+
+#[test]
+fn the_turn_at_full_resolution_meets_the_targets() {
+    let report = eval_scenario_at("urban-turn", 0.0, 1.0, &EngineConfig::default(), 64, 2048);
+    let l_lidar = stats(&report, "l_lidar", "all_unmasked");
+    assert!(
+        l_lidar.median_abs < 0.02 && l_lidar.p90_abs < 0.05,
+        "{l_lidar:?}"
+    );
+    for class in ["static_road", "static_facing", "static_oblique"] {
+        let d = stats(&report, "disagreement", class);
+        assert!(d.p90_abs < 0.05, "D on {class}: {d:?}");
+    }
+    let fused = stats(&report, "fused", "all_unmasked").rmse;
+    let ray_ego = stats(&report, "l_ray_ego", "all_unmasked").rmse;
+    assert!(
+        fused < l_lidar.rmse && fused < ray_ego,
+        "fused {fused} vs {} / {ray_ego}",
+        l_lidar.rmse
+    );
+}

@@ -535,7 +535,10 @@ fn raw_cell(
             ..nan
         };
     }
-    let incidence = f64::from(current.incidence_cos[cell]);
+    // Near grazing a small normal motion moves the range a lot; but a fitted
+    // normal can be wrong (two surfaces in one window), so obliqueness excuses
+    // at most 1.4 times the plausible displacement.
+    let incidence = f64::from(current.incidence_cos[cell]).max(0.7);
     if (range_now - range_before).abs() * incidence > config.max_closing_speed_mps * dt_s {
         flags |= mask::OCCLUSION;
     }
