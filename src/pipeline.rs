@@ -6,7 +6,6 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::time::Instant;
 
@@ -428,30 +427,17 @@ fn feed(
     log_time_ns: u64,
     decoded: Decoded,
 ) -> Vec<PairEvent> {
-    match decoded {
+    match &decoded {
         Decoded::Scan(scan) => {
             counts.scans += 1;
             counts.lidar_points += scan.points_m.len() as u64;
             counts.invalid_points_skipped += u64::from(scan.skipped_invalid_points);
-            pairer.push_scan(log_time_ns, Arc::new(scan))
         }
-        Decoded::Imu(sample) => {
-            counts.imu += 1;
-            pairer.push_imu(log_time_ns, sample)
-        }
-        Decoded::Velocity(sample) => {
-            counts.velocity += 1;
-            pairer.push_velocity(log_time_ns, sample)
-        }
-        Decoded::Transforms {
-            transforms,
-            is_static,
-        } => {
-            counts.tf_messages += 1;
-            pairer.push_transforms(&transforms, is_static);
-            Vec::new()
-        }
+        Decoded::Imu(_) => counts.imu += 1,
+        Decoded::Velocity(_) => counts.velocity += 1,
+        Decoded::Transforms { .. } => counts.tf_messages += 1,
     }
+    pairer.push_decoded(log_time_ns, decoded)
 }
 
 /// Send the pairer's events on; false when the writer has gone.

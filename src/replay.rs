@@ -2,14 +2,11 @@
 //! anything: what `eval`, benchmarks and tools need (`process` runs the same
 //! stages on threads, see `pipeline`).
 
-use std::path::Path;
-use std::sync::Arc;
-
 use crate::decode::{self, DecodeLimits};
 use crate::input::{Flow, InputError, InputFile, InputMessage, InputOptions, InputRecord};
-use crate::messages::Decoded;
 use crate::pairing::{PairEvent, PairingConfig, ScanPair, ScanPairer};
 use crate::topics::{Role, TopicError, TopicOverrides, select};
+use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
@@ -68,18 +65,7 @@ pub fn replay(
         ) else {
             return Flow::Continue(());
         };
-        let events = match decoded {
-            Decoded::Scan(scan) => pairer.push_scan(message.log_time_ns, Arc::new(scan)),
-            Decoded::Imu(sample) => pairer.push_imu(message.log_time_ns, sample),
-            Decoded::Velocity(sample) => pairer.push_velocity(message.log_time_ns, sample),
-            Decoded::Transforms {
-                transforms,
-                is_static,
-            } => {
-                pairer.push_transforms(&transforms, is_static);
-                Vec::new()
-            }
-        };
+        let events = pairer.push_decoded(message.log_time_ns, decoded);
         deliver(events, on_pair);
         Flow::Continue(())
     })?;

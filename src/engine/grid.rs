@@ -46,6 +46,29 @@ impl ImageGeometry {
     pub fn cells(&self) -> usize {
         self.rows * self.cols
     }
+
+    /// The cells around `cell` within `half_rows` beams and `half_cols`
+    /// columns, the cell itself excluded. Columns wrap around (the sweep is a
+    /// circle), rows do not.
+    pub fn neighbours(
+        &self,
+        cell: usize,
+        half_rows: usize,
+        half_cols: usize,
+    ) -> impl Iterator<Item = usize> + '_ {
+        let (row, col) = ((cell / self.cols) as i64, (cell % self.cols) as i64);
+        let (half_rows, half_cols) = (half_rows as i64, half_cols as i64);
+        (-half_rows..=half_rows).flat_map(move |dr| {
+            (-half_cols..=half_cols).filter_map(move |dc| {
+                let r = row + dr;
+                if (dr == 0 && dc == 0) || r < 0 || r >= self.rows as i64 {
+                    return None;
+                }
+                let c = (col + dc).rem_euclid(self.cols as i64) as usize;
+                Some(r as usize * self.cols + c)
+            })
+        })
+    }
 }
 
 /// Azimuth and elevation of a point.

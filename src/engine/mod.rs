@@ -414,10 +414,10 @@ fn per_cell(
     let moving: Vec<bool> = (0..geometry.cells())
         .map(|cell| {
             let row = cell / geometry.cols;
-            let flagged: Vec<usize> = neighbours(geometry, cell)
-                .filter(|&n| candidate[n])
-                .collect();
-            candidate[cell] && flagged.iter().any(|&n| n / geometry.cols != row)
+            candidate[cell]
+                && geometry
+                    .neighbours(cell, 1, 1)
+                    .any(|n| candidate[n] && n / geometry.cols != row)
         })
         .collect();
     let pointwise: Vec<f32> = (0..geometry.cells())
@@ -442,13 +442,11 @@ fn per_cell(
                 let m = current.normal[n];
                 normal[0] * m[0] + normal[1] * m[1] + normal[2] * m[2] > 0.95
             };
-            let mut values: Vec<f32> = std::iter::once(cell)
-                .chain(neighbours(geometry, cell).filter(|&n| same_surface(n)))
+            let values = std::iter::once(cell)
+                .chain(geometry.neighbours(cell, 1, 1).filter(|&n| same_surface(n)))
                 .filter(|&n| trusted_static(n))
-                .map(|n| pointwise[n])
-                .collect();
-            values.sort_by(f32::total_cmp);
-            values[values.len() / 2]
+                .map(|n| pointwise[n]);
+            median_3x3(values).unwrap_or(pointwise[cell])
         })
         .collect();
     let thresholds = config.threat_ttc_s;
@@ -587,19 +585,18 @@ fn raw_cell(
 /// surface rendered along the same ray (25 degrees).
 const CREASE_COS: f32 = 0.906;
 
-/// The 8 neighbours of a cell (columns wrap).
-fn neighbours(geometry: &ImageGeometry, cell: usize) -> impl Iterator<Item = usize> + '_ {
-    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    (-1i64..=1).flat_map(move |dr| {
-        (-1i64..=1).filter_map(move |dc| {
-            let r = row as i64 + dr;
-            if (dr == 0 && dc == 0) || r < 0 || r >= geometry.rows as i64 {
-                return None;
-            }
-            let c = (col as i64 + dc).rem_euclid(geometry.cols as i64) as usize;
-            Some(r as usize * geometry.cols + c)
-        })
-    })
+/// Median (upper middle) of at most the 9 values of a 3x3 window, without
+/// allocating: this runs for every cell.
+fn median_3x3(values: impl Iterator<Item = f32>) -> Option<f32> {
+    let mut window = [0f32; 9];
+    let mut count = 0;
+    for value in values.take(9) {
+        window[count] = value;
+        count += 1;
+    }
+    let window = &mut window[..count];
+    window.sort_unstable_by(f32::total_cmp);
+    window.get(count / 2).copied()
 }
 
 /// The best estimate per cell: on the static world the ego prediction (exact
@@ -630,13 +627,11 @@ fn fuse(
     if moving[cell] {
         // The median over the moving neighbours: less noise, and an edge cell
         // with a wild value cannot drag it.
-        let mut values: Vec<f32> = std::iter::once(cell)
-            .chain(neighbours(geometry, cell))
+        let values = std::iter::once(cell)
+            .chain(geometry.neighbours(cell, 1, 1))
             .filter(|&n| moving[n] && raw[n].l_lidar.is_finite() && raw[n].mask == 0)
-            .map(|n| raw[n].l_lidar)
-            .collect();
-        values.sort_by(f32::total_cmp);
-        return values.get(values.len() / 2).copied().unwrap_or(r.l_lidar);
+            .map(|n| raw[n].l_lidar);
+        return median_3x3(values).unwrap_or(r.l_lidar);
     }
     if !r.l_ray_ego.is_finite() {
         return r.l_lidar;

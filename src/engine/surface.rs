@@ -64,7 +64,10 @@ impl Surfaces {
     ) -> Self {
         let fitted: Vec<CellSurface> = (0..geometry.cells())
             .into_par_iter()
-            .map(|cell| fit_cell(scan, image, geometry, cell, params))
+            // One scratch buffer per worker: no allocation per cell.
+            .map_init(Scratch::default, |scratch, cell| {
+                fit_cell(scan, image, geometry, cell, params, scratch)
+            })
             .collect();
         Self {
             range_m: fitted.iter().map(|c| c.range_m).collect(),
@@ -104,29 +107,11 @@ fn point_of(scan: &Scan, image: &RangeImage, cell: usize) -> Option<Vector3<f64>
     })
 }
 
-/// The 8 neighbours of a cell (columns wrap around, rows do not).
-fn neighbours(
-    geometry: &ImageGeometry,
-    cell: usize,
-    half_rows: usize,
-    half_cols: usize,
-) -> impl Iterator<Item = usize> + '_ {
-    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    let half = half_cols as i64;
-    let half_rows = half_rows as i64;
-    (-half_rows..=half_rows).flat_map(move |dr| {
-        (-half..=half).filter_map(move |dc| {
-            if dr == 0 && dc == 0 {
-                return None;
-            }
-            let r = row as i64 + dr;
-            if r < 0 || r >= geometry.rows as i64 {
-                return None;
-            }
-            let c = (col as i64 + dc).rem_euclid(geometry.cols as i64) as usize;
-            Some(r as usize * geometry.cols + c)
-        })
-    })
+/// Reused point buffers of one worker thread.
+#[derive(Default)]
+struct Scratch {
+    points: Vec<Vector3<f64>>,
+    on_plane: Vec<Vector3<f64>>,
 }
 
 /// Fit the cell's plane in its window; where the window's points spread over
@@ -138,6 +123,7 @@ fn fit_cell(
     geometry: &ImageGeometry,
     cell: usize,
     params: SurfaceParams,
+    scratch: &mut Scratch,
 ) -> CellSurface {
     let mut best = EMPTY;
     for grow in 1..=3 {
@@ -147,8 +133,8 @@ fn fit_cell(
             geometry,
             cell,
             params,
-            grow,
-            grow * params.half_cols,
+            (grow, grow * params.half_cols),
+            scratch,
         );
         best = surface;
         if spread.is_none_or(|s| s >= 2.0 * params.range_noise_m) {
@@ -159,15 +145,15 @@ fn fit_cell(
 }
 
 /// One fit over a window of `2 half_rows + 1` beams by `2 half_cols + 1`
-/// columns; also returns the in-plane spread of the points fitted.
+/// columns (`(half_rows, half_cols)`); also returns the in-plane spread of the points fitted.
 fn fit_window(
     scan: &Scan,
     image: &RangeImage,
     geometry: &ImageGeometry,
     cell: usize,
     params: SurfaceParams,
-    half_rows: usize,
-    half_cols: usize,
+    (half_rows, half_cols): (usize, usize),
+    scratch: &mut Scratch,
 ) -> (CellSurface, Option<f64>) {
     let Some(center) = point_of(scan, image, cell) else {
         return (EMPTY, None);
@@ -182,11 +168,11 @@ fn fit_window(
         ..EMPTY
     };
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
-    let mut points: Vec<Vector3<f64>> =
-        Vec::with_capacity((2 * half_rows + 1) * (2 * half_cols + 1));
+    let Scratch { points, on_plane } = scratch;
+    points.clear();
     points.push(center);
     let mut far_neighbour = false;
-    for n in neighbours(geometry, cell, half_rows, half_cols) {
+    for n in geometry.neighbours(cell, half_rows, half_cols) {
         if let Some(p) = point_of(scan, image, n) {
             if (p.norm() - range).abs() <= 0.3 * range + 0.5 {
                 points.push(p);
@@ -195,7 +181,7 @@ fn fit_window(
             }
         }
     }
-    let Some((normal, centroid, spread)) = fit_plane_spread(&points) else {
+    let Some((normal, centroid, spread)) = fit_plane_spread(points) else {
         return (
             CellSurface {
                 edge: far_neighbour,
@@ -206,16 +192,18 @@ fn fit_window(
     };
     // Points off the plane by more than noise belong to another surface.
     let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
-    let on_plane: Vec<Vector3<f64>> = points
-        .iter()
-        .copied()
-        .filter(|p| (p - centroid).dot(&normal).abs() <= tolerance)
-        .collect();
+    on_plane.clear();
+    on_plane.extend(
+        points
+            .iter()
+            .copied()
+            .filter(|p| (p - centroid).dot(&normal).abs() <= tolerance),
+    );
     let edge = far_neighbour || on_plane.len() < points.len();
     let (normal, centroid, support, spread) = if on_plane.len() == points.len() {
         (normal, centroid, points.len(), spread)
     } else {
-        match fit_plane_spread(&on_plane) {
+        match fit_plane_spread(on_plane) {
             Some((n, c, s)) => (n, c, on_plane.len(), s),
             None => return (CellSurface { edge, ..raw }, None),
         }

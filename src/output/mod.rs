@@ -116,7 +116,6 @@ pub struct OutputWriter {
     writer: mcap::Writer<BufWriter<File>>,
     schema_ids: IdAllocator,
     channel_ids: IdAllocator,
-    bytes_hint: u64,
 }
 
 impl OutputWriter {
@@ -159,7 +158,6 @@ impl OutputWriter {
             writer,
             schema_ids: IdAllocator::new(catalog.used_schema_ids(), 1),
             channel_ids: IdAllocator::new(catalog.used_channel_ids(), 0),
-            bytes_hint: 0,
         };
         output.register_input(catalog)?;
         Ok(output)
@@ -229,7 +227,6 @@ impl OutputWriter {
             log_time: message.log_time_ns,
             publish_time: message.publish_time_ns,
         };
-        self.bytes_hint += message.data.len() as u64;
         self.writer
             .write_to_known_channel(&header, &message.data)
             .map_err(|e| self.write_err(e))
@@ -274,11 +271,6 @@ impl OutputWriter {
         self.writer
             .attach(&attachment)
             .map_err(|e| self.write_err(e))
-    }
-
-    /// Payload bytes of input messages copied so far (for progress).
-    pub fn copied_bytes(&self) -> u64 {
-        self.bytes_hint
     }
 
     /// Finish the file (summary, footer), flush it to disk and move it to its

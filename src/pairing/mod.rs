@@ -33,7 +33,7 @@ pub use frames::{
 };
 pub use motion::{AngularSource, MotionSample, PairMotion, TimeSeries};
 
-use crate::messages::{FrameTransform, ImuSample, Scan, StampNs, VelocitySample};
+use crate::messages::{Decoded, FrameTransform, ImuSample, Scan, StampNs, VelocitySample};
 use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion, seconds_to_ns};
 
 /// Accepted dts kept for the running median that stands in for the nominal
@@ -356,6 +356,22 @@ impl ScanPairer {
     /// Static transforms build the tree used for extrinsics; dynamic `/tf`
     /// is ignored (sensor mounts are static, and odometry frames on `/tf`
     /// must not be mistaken for them).
+    /// Feed any decoded message (the dispatch every caller would otherwise repeat).
+    pub fn push_decoded(&mut self, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
+        match decoded {
+            Decoded::Scan(scan) => self.push_scan(log_time_ns, Arc::new(scan)),
+            Decoded::Imu(sample) => self.push_imu(log_time_ns, sample),
+            Decoded::Velocity(sample) => self.push_velocity(log_time_ns, sample),
+            Decoded::Transforms {
+                transforms,
+                is_static,
+            } => {
+                self.push_transforms(&transforms, is_static);
+                Vec::new()
+            }
+        }
+    }
+
     pub fn push_transforms(&mut self, transforms: &[FrameTransform], is_static: bool) {
         if !is_static {
             return;
