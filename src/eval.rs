@@ -10,7 +10,7 @@ use crate::engine::{self, EngineConfig, PairLooming};
 use crate::input::{InputFile, InputOptions};
 use crate::messages::{Scan, StampNs};
 use crate::pairing::ScanPair;
-use crate::replay::{ReplayError, replay};
+use crate::replay::{ReplayError, replay_input};
 use crate::ros::msgs::PointCloud2;
 
 pub const TRUTH_POINTS_TOPIC: &str = "/truth/points";
@@ -368,15 +368,14 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
         .find(|c| c.topic == TRUTH_POINTS_TOPIC)
         .map(|c| c.id)
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
-    drop(input);
     // Truth arrives with its scan, before the pair that reports on it.
     let truths = std::cell::RefCell::new(BTreeMap::<StampNs, Vec<PointTruth>>::new());
     let mut failure: Option<String> = None;
     let mut accumulator = Accumulator::default();
     let (mut pairs, mut with_ego) = (0u64, 0u64);
     let mut cache = engine::EngineCache::default();
-    replay(
-        path,
+    replay_input(
+        &input,
         &mut |message| {
             if message.channel_id == truth_channel {
                 match decode_truth(&message.data) {

@@ -16,15 +16,28 @@ pub enum ReplayError {
     Topic { path: String, source: TopicError },
 }
 
-/// Read `path` in log-time order with auto-detected topics: every message goes
-/// to `on_message` (before decoding), every scan pair to `on_pair`. Messages
-/// that fail to decode are skipped.
+/// Open `path` and [`replay_input`] it.
 pub fn replay(
     path: &Path,
     on_message: &mut dyn FnMut(&InputMessage),
     on_pair: &mut dyn FnMut(ScanPair),
 ) -> Result<(), ReplayError> {
-    let input = InputFile::open(path, InputOptions::default())?;
+    replay_input(
+        &InputFile::open(path, InputOptions::default())?,
+        on_message,
+        on_pair,
+    )
+}
+
+/// Read an opened log in log-time order with auto-detected topics: every
+/// message goes to `on_message` (before decoding), every scan pair to
+/// `on_pair`. Messages that fail to decode are skipped.
+pub fn replay_input(
+    input: &InputFile,
+    on_message: &mut dyn FnMut(&InputMessage),
+    on_pair: &mut dyn FnMut(ScanPair),
+) -> Result<(), ReplayError> {
+    let path = input.path();
     let catalog = input.catalog().clone();
     let topics =
         select(&catalog, &TopicOverrides::default()).map_err(|source| ReplayError::Topic {

@@ -108,7 +108,8 @@ pub struct Availability {
 pub struct PairLooming {
     pub geometry: ImageGeometry,
     pub availability: Availability,
-    /// The current scan gridded (cell -> point index, nearest range).
+    /// The current scan gridded: cell -> point index and nearest range, and
+    /// `image.point_cell`, point -> cell (`NO_POINT` if none).
     pub image: RangeImage,
     /// Per cell, 1/s (NaN where not computed).
     pub l_lidar: Vec<f32>,
@@ -125,8 +126,6 @@ pub struct PairLooming {
     pub threat: Vec<ThreatLevel>,
     /// Time between the compared returns, s.
     pub dt_s: Vec<f32>,
-    /// Per point of the current scan: its cell (`NO_POINT` if none).
-    pub point_cell: Vec<u32>,
     /// Per point: `L_ego`, 1/s (NaN without velocity).
     pub l_ego: Vec<f32>,
     /// Per point: threat level of its cell when the point is that cell's surface.
@@ -290,7 +289,6 @@ fn compute_from_surfaces(
         },
         spheres: velocity.map(|v| threat::spheres(&v, &config.threat_ttc_s)),
         velocity_mps: velocity.map(|v| [v.x, v.y, v.z]),
-        point_cell: cur_image.point_cell.clone(),
         image: cur_image.clone(),
         geometry,
         l_lidar: cells.l_lidar,
