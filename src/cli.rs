@@ -7,7 +7,10 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use looming::annotate::{AnnotateConfig, FieldSet};
 use looming::decode::DecodeLimits;
+use looming::engine::EngineConfig;
+use looming::events::EventConfig;
 use looming::input::{InputOptions, ReadMode};
 use looming::output::{OutputCompression, OutputOptions};
 use looming::pipeline::{PairingSettings, ProcessConfig, ProcessError, ProgressSink, RunSummary};
@@ -59,6 +62,10 @@ enum Command {
     ///
     /// FILE must carry /truth/points (a `looming synth` drive, processed or not).
     Eval(EvalArgs),
+    /// List the near-miss events of an annotated log (its /looming/events),
+    /// ranked by minimum time to contact.
+    #[command(after_help = EXIT_CODES)]
+    Events(EventsArgs),
 }
 
 #[derive(Debug, Args)]
@@ -159,9 +166,61 @@ struct ProcessArgs {
     /// Also write the run summary as JSON to this file.
     #[arg(long, value_name = "FILE")]
     json_summary: Option<PathBuf>,
+    /// Also write the near-miss events, ranked by minimum time to contact, to
+    /// this JSON file (schema: schemas/looming.NearMissEvents.schema.json).
+    #[arg(long, value_name = "FILE.json")]
+    events: Option<PathBuf>,
+    /// Per-point fields of /looming/points: `default` (x, y, z, looming,
+    /// colour) or `full` (adds l_lidar, l_ego, l_ray_ego, disagreement,
+    /// confidence, threat, mask).
+    #[arg(long, value_enum, default_value_t = FieldSet::Default)]
+    fields: FieldSet,
+    /// Accept an input that already holds /looming/* channels: drop them and
+    /// write fresh ones.
+    #[arg(long)]
+    replace: bool,
+    /// Threat levels low, medium, high as times to contact, seconds.
+    #[arg(long, value_name = "LOW,MEDIUM,HIGH", default_value = "3,1.5,1", value_parser = parse_threat_ttc)]
+    threat_ttc: [f64; 3],
+    /// Near-miss threshold as a time to contact, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 1.5)]
+    event_ttc: f64,
+    /// Smallest near-miss cluster, range-image cells [default: the cells a
+    /// 0.3 m square covers at 10 m, at least 3: 40 at 64 x 2048, 5 at 32 x 512].
+    #[arg(long, value_name = "CELLS")]
+    event_min_cells: Option<usize>,
+    /// Consecutive scan pairs a cluster must last to be a near miss.
+    #[arg(long, value_name = "PAIRS", default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+    event_min_pairs: u64,
+    /// Half width of the ego corridor in which near misses are sought, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 2.0)]
+    corridor_half_width: f64,
     /// No progress bar and no summary on stderr.
     #[arg(short, long)]
     quiet: bool,
+}
+
+fn parse_threat_ttc(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    let [low, medium, high] = values[..] else {
+        return Err("three times to contact are needed: LOW,MEDIUM,HIGH".into());
+    };
+    if !(high > 0.0 && medium > high && low > medium && low.is_finite()) {
+        return Err("times to contact must be finite and decrease: LOW > MEDIUM > HIGH > 0".into());
+    }
+    Ok([low, medium, high])
+}
+
+#[derive(Debug, Args)]
+struct EventsArgs {
+    /// An MCAP written by `looming process`.
+    file: PathBuf,
+    /// Print JSON (the events, ranked) instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -194,7 +253,19 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Inspect(args) => inspect(args),
         Command::Synth(args) => synth(args),
         Command::Eval(args) => eval(args),
+        Command::Events(args) => events(args),
     }
+}
+
+fn events(args: EventsArgs) -> Result<(), Failure> {
+    let mut events = looming::events::read_events(&args.file)?;
+    looming::events::rank(&mut events);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&events)?);
+    } else {
+        print!("{}", looming::events::events_table(&events));
+    }
+    Ok(())
 }
 
 fn eval(args: EvalArgs) -> Result<(), Failure> {
@@ -279,6 +350,21 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
             "--reorder-window must be a non-negative number of seconds"
         )));
     }
+    if !(args.event_ttc.is_finite() && args.event_ttc > 0.0) {
+        return Err(usage(anyhow::anyhow!(
+            "--event-ttc must be a positive number of seconds"
+        )));
+    }
+    if !(args.corridor_half_width.is_finite() && args.corridor_half_width > 0.0) {
+        return Err(usage(anyhow::anyhow!(
+            "--corridor-half-width must be a positive number of metres"
+        )));
+    }
+    if args.event_min_cells == Some(0) {
+        return Err(usage(anyhow::anyhow!(
+            "--event-min-cells must be at least 1"
+        )));
+    }
     if args.max_gap.is_some_and(|g| !(g.is_finite() && g > 0.0)) {
         return Err(usage(anyhow::anyhow!(
             "--max-gap must be a positive number of seconds"
@@ -311,6 +397,22 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
         decode_limits: DecodeLimits {
             max_points: args.max_points,
         },
+        annotate: AnnotateConfig {
+            engine: EngineConfig {
+                threat_ttc_s: args.threat_ttc,
+                ..EngineConfig::default()
+            },
+            events: EventConfig {
+                ttc_threshold_s: args.event_ttc,
+                min_cells: args.event_min_cells,
+                min_pairs: args.event_min_pairs,
+                corridor_half_width_m: args.corridor_half_width,
+                ..EventConfig::default()
+            },
+            fields: args.fields,
+        },
+        replace: args.replace,
+        events_file: args.events.clone(),
     };
     let progress = Progress::new(args.quiet);
     let result = looming::pipeline::process(&config, &progress);
@@ -425,6 +527,40 @@ fn summary_text(s: &RunSummary) -> String {
         p.pairs_without_velocity,
         p.pairs_without_imu
     );
+    let a = &s.annotation;
+    let _ = writeln!(
+        out,
+        "  looming       {} pairs annotated ({} LiDAR-only, {} without a range image); {} points, {} moving, {} at threat; engine {:.1} s",
+        a.pairs_annotated,
+        a.pairs_lidar_only,
+        a.pairs_without_image,
+        a.points_written,
+        a.disagreement_points_written,
+        a.threat_points_written,
+        a.engine_s
+    );
+    let _ = writeln!(out, "  near misses   {}", s.events.len());
+    for event in s.events.iter().take(5) {
+        let _ = writeln!(
+            out,
+            "    {} at {}",
+            looming::annotate::foxglove::event_summary(event),
+            looming::pipeline::format_log_time(event.start_log_time_ns)
+        );
+    }
+    if s.events.len() > 5 {
+        let _ = writeln!(
+            out,
+            "    ... (all of them with `looming events` or --events)"
+        );
+    }
+    if s.replaced_messages > 0 {
+        let _ = writeln!(
+            out,
+            "  replaced      {} messages of an earlier run's /looming/* channels",
+            s.replaced_messages
+        );
+    }
     let _ = writeln!(out, "  bad messages  {}", s.bad_messages);
     for bad in s.bad_message_examples.iter().take(5) {
         let _ = writeln!(out, "    {bad}");

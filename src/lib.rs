@@ -5,9 +5,11 @@
 //! [`pairing`] (synchronised scan pairs) -> [`output`] (MCAP writer);
 //! [`pipeline`] wires them together on threads with bounded channels.
 
+pub mod annotate;
 pub mod decode;
 pub mod engine;
 pub mod eval;
+pub mod events;
 pub mod fixtures;
 pub mod input;
 pub mod inspect;

@@ -9,7 +9,10 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::time::Instant;
 
+use crate::annotate::{AnnotateConfig, AnnotateStats, Annotator, OwnMessage, channel_specs};
 use crate::decode::{self, DecodeLimits};
+use crate::events::{EventsFile, NearMissEvent};
+use crate::input::Catalog;
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
 use crate::messages::Decoded;
 use crate::output::pairs::{PairRecord, pairs_channel_spec};
@@ -34,6 +37,12 @@ pub struct ProcessConfig {
     pub strict: bool,
     #[serde(skip)]
     pub decode_limits: DecodeLimits,
+    pub annotate: AnnotateConfig,
+    /// Drop the `/looming/*` channels of an already processed input and write
+    /// fresh ones (else such an input is refused).
+    pub replace: bool,
+    /// Also write the events, ranked, to this JSON file.
+    pub events_file: Option<PathBuf>,
 }
 
 /// Pairing options from the command line.
@@ -101,8 +110,15 @@ pub enum ProcessError {
     Topic { path: PathBuf, source: TopicError },
     #[error("invalid option: {0}")]
     Config(String),
-    #[error("{path}: already holds looming output ({topics}); process the original log instead")]
+    #[error(
+        "{path}: already holds looming output ({topics}); process the original log, or pass --replace to drop these channels and write fresh ones"
+    )]
     AlreadyProcessed { path: PathBuf, topics: String },
+    #[error("{path}: cannot write the events file: {source}")]
+    EventsFile {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("bad input (strict mode): {0}")]
     Strict(String),
     #[error("internal error: {0}")]
@@ -135,6 +151,11 @@ pub struct RunSummary {
     pub decoded: DecodedCounts,
     pub pairs_written: u64,
     pub pairing: PairingStats,
+    pub annotation: AnnotateStats,
+    /// Near-miss events, ranked by minimum time to contact.
+    pub events: Vec<NearMissEvent>,
+    /// Messages of an earlier run's `/looming/*` channels dropped by `--replace`.
+    pub replaced_messages: u64,
     pub bad_messages: u64,
     pub bad_messages_by_topic: BTreeMap<String, u64>,
     /// The first few bad messages, in full.
@@ -174,7 +195,9 @@ pub fn process(
         None => None,
     };
     let mut input = InputFile::open(&config.input, config.input_options.clone())?;
-    refuse_processed_input(&input)?;
+    if !config.replace {
+        refuse_processed_input(&input)?;
+    }
     let mut restarted_because = None;
     loop {
         let topics =
@@ -186,13 +209,14 @@ pub fn process(
         // IndexedReader silently skips messages outside chunks: if the count
         // disagrees with the statistics, read the file linearly instead.
         let expected = input.expected_messages();
+        let read = outcome.summary_counts.messages + outcome.summary_counts.replaced;
         if *input.mode() == ReadMode::Indexed
-            && expected.is_some_and(|n| n != outcome.summary_counts.messages)
+            && expected.is_some_and(|n| n != read)
             && outcome.report.bad_crc_chunks == 0
         {
             let reason = format!(
                 "the chunk indexes yielded {} messages but the statistics count {}",
-                outcome.summary_counts.messages,
+                read,
                 expected.unwrap_or(0)
             );
             drop(outcome.writer);
@@ -204,13 +228,31 @@ pub fn process(
     }
 }
 
+fn is_ours(topic: &str) -> bool {
+    topic.starts_with("/looming/")
+}
+
+/// The input's catalog without the `/looming/*` channels (and the schemas
+/// only they use), for `--replace`.
+fn without_our_channels(catalog: &Catalog) -> Catalog {
+    let mut kept = catalog.clone();
+    kept.channels.retain(|_, c| !is_ours(&c.topic));
+    let used: std::collections::BTreeSet<u16> = kept
+        .channels
+        .values()
+        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
+        .collect();
+    kept.schemas.retain(|id, _| used.contains(id));
+    kept
+}
+
 /// A log that already carries `/looming/*` channels would end up with two sets.
 fn refuse_processed_input(input: &InputFile) -> Result<(), ProcessError> {
     let ours: Vec<&str> = input
         .catalog()
         .channels
         .values()
-        .filter(|c| c.topic.starts_with("/looming/"))
+        .filter(|c| is_ours(&c.topic))
         .map(|c| c.topic.as_str())
         .collect();
     if ours.is_empty() {
@@ -236,6 +278,8 @@ struct WriterCounts {
     metadata: u64,
     attachments: u64,
     own_messages: u64,
+    /// Records of an earlier run dropped by `--replace`.
+    replaced: u64,
 }
 
 /// Items from the reader+decoder stage.
@@ -248,12 +292,7 @@ enum FromReader {
 /// Items for the writer.
 enum ToWriter {
     Input(InputRecord),
-    Own {
-        channel_id: u16,
-        sequence: u32,
-        log_time_ns: u64,
-        data: Vec<u8>,
-    },
+    Own(OwnMessage),
 }
 
 fn run_once(
@@ -263,8 +302,25 @@ fn run_once(
     cli_extrinsic: Option<nalgebra::Isometry3<f64>>,
     progress: &dyn ProgressSink,
 ) -> Result<PassOutcome, ProcessError> {
-    let mut writer = OutputWriter::create(&config.output, &config.output_options, input.catalog())?;
+    let catalog = if config.replace {
+        without_our_channels(input.catalog())
+    } else {
+        Catalog::clone(input.catalog())
+    };
+    let replaced_channels: std::collections::BTreeSet<u16> = input
+        .catalog()
+        .channels
+        .keys()
+        .filter(|id| !catalog.channels.contains_key(id))
+        .copied()
+        .collect();
+    let mut writer = OutputWriter::create(&config.output, &config.output_options, &catalog)?;
     let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
+    let annotate_channels = channel_specs()
+        .iter()
+        .map(|spec| writer.add_own_channel(spec))
+        .collect::<Result<Vec<u16>, _>>()?;
+    let annotator = Annotator::new(config.annotate.clone(), &annotate_channels);
     let pairing_config = PairingConfig {
         max_gap_periods: config.pairing.max_gap_periods,
         max_gap_s: config.pairing.max_gap_s,
@@ -281,9 +337,15 @@ fn run_once(
         let pairing = scope.spawn(move || {
             let mut pairer = ScanPairer::new(pairing_config);
             pairer.set_nominal_period_s(nominal_period_s);
-            pair_scans(pairer, pairs_channel, reader_rx, writer_tx)
+            pair_scans(pairer, annotator, pairs_channel, reader_rx, writer_tx)
         });
-        let written = write_all(&mut writer, writer_rx, input.expected_messages(), progress);
+        let written = write_all(
+            &mut writer,
+            writer_rx,
+            &replaced_channels,
+            input.expected_messages(),
+            progress,
+        );
         let read = reader
             .join()
             .map_err(|_| ProcessError::Internal("the reader thread panicked".into()))?;
@@ -380,11 +442,15 @@ struct PairingOutcome {
     bad_by_topic: BTreeMap<String, u64>,
     bad_examples: Vec<BadMessage>,
     warnings: Vec<String>,
+    annotation: AnnotateStats,
+    events: Vec<NearMissEvent>,
 }
 
-/// Stage 2: feed the pairer, pass every record on, add `/looming/pairs`.
+/// Stage 2: feed the pairer, pass every record on, add `/looming/pairs` and
+/// the annotation of every pair.
 fn pair_scans(
     mut pairer: ScanPairer,
+    mut annotator: Annotator,
     pairs_channel: u16,
     rx: Receiver<FromReader>,
     tx: SyncSender<ToWriter>,
@@ -411,13 +477,21 @@ fn pair_scans(
                 decoded,
             } => feed(&mut pairer, &mut outcome.decoded, log_time_ns, decoded),
         };
-        if !emit(events, pairs_channel, &mut outcome, &tx) {
+        if !emit(events, &mut annotator, pairs_channel, &mut outcome, &tx) {
             break;
         }
     }
     let events = pairer.finish();
-    emit(events, pairs_channel, &mut outcome, &tx);
+    if emit(events, &mut annotator, pairs_channel, &mut outcome, &tx) {
+        for message in annotator.finish() {
+            if tx.send(ToWriter::Own(message)).is_err() {
+                break;
+            }
+        }
+    }
     outcome.stats = Some(pairer.stats().clone());
+    outcome.annotation = annotator.stats().clone();
+    outcome.events = annotator.events().to_vec();
     outcome
 }
 
@@ -440,9 +514,10 @@ fn feed(
     pairer.push_decoded(log_time_ns, decoded)
 }
 
-/// Send the pairer's events on; false when the writer has gone.
+/// Send the pairer's events on, annotated; false when the writer has gone.
 fn emit(
     events: Vec<PairEvent>,
+    annotator: &mut Annotator,
     pairs_channel: u16,
     outcome: &mut PairingOutcome,
     tx: &SyncSender<ToWriter>,
@@ -452,15 +527,20 @@ fn emit(
             PairEvent::Pair(pair) => {
                 let record = PairRecord::from_pair(&pair);
                 let data = serde_json::to_vec(&record).expect("pair records always serialise");
-                let item = ToWriter::Own {
+                let item = ToWriter::Own(OwnMessage {
                     channel_id: pairs_channel,
                     sequence: outcome.pairs_written as u32,
                     log_time_ns: pair.current_log_time_ns,
                     data,
-                };
+                });
                 outcome.pairs_written += 1;
                 if tx.send(item).is_err() {
                     return false;
+                }
+                for message in annotator.annotate(&pair) {
+                    if tx.send(ToWriter::Own(message)).is_err() {
+                        return false;
+                    }
                 }
             }
             PairEvent::Warning(warning) => outcome.warnings.push(warning),
@@ -473,12 +553,23 @@ fn emit(
 fn write_all(
     writer: &mut OutputWriter,
     rx: Receiver<ToWriter>,
+    replaced_channels: &std::collections::BTreeSet<u16>,
     total: Option<u64>,
     progress: &dyn ProgressSink,
 ) -> Result<WriterCounts, ProcessError> {
     let mut counts = WriterCounts::default();
     for item in rx {
         match item {
+            ToWriter::Input(InputRecord::Message(message))
+                if replaced_channels.contains(&message.channel_id) =>
+            {
+                counts.replaced += 1;
+            }
+            ToWriter::Input(InputRecord::Metadata(metadata))
+                if !replaced_channels.is_empty() && metadata.name == RUN_METADATA_NAME =>
+            {
+                // The earlier run's record; this run writes its own.
+            }
             ToWriter::Input(InputRecord::Message(message)) => {
                 writer.write_input_message(&message)?;
                 counts.messages += 1;
@@ -494,12 +585,12 @@ fn write_all(
                 writer.write_attachment(&attachment)?;
                 counts.attachments += 1;
             }
-            ToWriter::Own {
+            ToWriter::Own(OwnMessage {
                 channel_id,
                 sequence,
                 log_time_ns,
                 data,
-            } => {
+            }) => {
                 writer.write_own_message(channel_id, sequence, log_time_ns, &data)?;
                 counts.own_messages += 1;
             }
@@ -537,6 +628,11 @@ fn finish_run(
     }
     warnings.extend(report.warnings.iter().map(|w| w.message.clone()));
     warnings.extend(pairing.warnings.iter().cloned());
+    let mut events = pairing.events;
+    crate::events::rank(&mut events);
+    if let Some(path) = &config.events_file {
+        write_events_file(config, path, &events, pairing.annotation.event_min_cells)?;
+    }
     Ok(RunSummary {
         tool_version: env!("CARGO_PKG_VERSION").into(),
         input: config.input.display().to_string(),
@@ -549,6 +645,9 @@ fn finish_run(
         decoded: pairing.decoded,
         pairs_written: pairing.pairs_written,
         pairing: stats,
+        annotation: pairing.annotation,
+        events,
+        replaced_messages: summary_counts.replaced,
         bad_messages: pairing.bad_messages,
         bad_messages_by_topic: pairing.bad_by_topic,
         bad_message_examples: pairing.bad_examples,
@@ -559,6 +658,9 @@ fn finish_run(
         elapsed_s: started.elapsed().as_secs_f64(),
     })
 }
+
+/// Name of the metadata record a run writes.
+pub const RUN_METADATA_NAME: &str = "looming";
 
 /// The `looming` metadata record: tool version and the fully resolved
 /// configuration. Holds nothing that changes between identical runs.
@@ -585,15 +687,47 @@ fn run_metadata(
         "nominal_period_s": stats.nominal_period_s,
         "output": config.output_options,
         "max_points_per_scan": config.decode_limits.max_points,
+        "annotate": config.annotate,
+        "replace": config.replace,
     });
     let mut metadata = BTreeMap::new();
     metadata.insert("tool".to_string(), "looming".to_string());
     metadata.insert("version".to_string(), env!("CARGO_PKG_VERSION").to_string());
     metadata.insert("config".to_string(), resolved.to_string());
     mcap::records::Metadata {
-        name: "looming".into(),
+        name: RUN_METADATA_NAME.into(),
         metadata,
     }
+}
+
+/// The `--events` file, written whole to a temporary file and renamed.
+fn write_events_file(
+    config: &ProcessConfig,
+    path: &Path,
+    events: &[NearMissEvent],
+    min_cells: Option<usize>,
+) -> Result<(), ProcessError> {
+    let file = EventsFile {
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        input: config.input.display().to_string(),
+        output: config.output.display().to_string(),
+        config: config.annotate.events.clone(),
+        min_cells,
+        events: events.to_vec(),
+    };
+    let err = |source| ProcessError::EventsFile {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).map_err(err)?;
+    let mut temp = tempfile::NamedTempFile::new_in(&dir).map_err(err)?;
+    serde_json::to_writer_pretty(&mut temp, &file).map_err(|e| err(e.into()))?;
+    temp.persist(path).map_err(|e| err(e.error))?;
+    Ok(())
 }
 
 fn file_size(path: &Path) -> u64 {

@@ -89,6 +89,21 @@ pub struct RangeImage {
 }
 
 impl RangeImage {
+    /// The cell whose surface point `index` is: its cell, when the point lies
+    /// within 5 % of the cell's nearest range. A return hidden behind that
+    /// surface (a second echo, a point seen through a gap) takes none of the
+    /// cell's values.
+    pub fn surface_cell(&self, scan: &Scan, index: usize) -> Option<usize> {
+        let cell = *self.point_cell.get(index)?;
+        if cell == NO_POINT {
+            return None;
+        }
+        let cell = cell as usize;
+        let p = scan.points_m[index];
+        let range_m = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        (range_m <= self.range_m[cell] * 1.05).then_some(cell)
+    }
+
     pub fn build(scan: &Scan, geometry: &ImageGeometry) -> Self {
         let cells = geometry.cells();
         let mut range_m = vec![f32::NAN; cells];

@@ -28,7 +28,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use crate::messages::{Scan, StampNs};
-use crate::pairing::ScanPair;
+use crate::pairing::{PairMotion, ScanPair};
 
 pub use grid::{ImageGeometry, NO_POINT, RangeImage};
 pub use threat::{ThreatLevel, ThreatSphere};
@@ -121,9 +121,14 @@ pub struct PairLooming {
     pub confidence: Vec<f32>,
     /// `mask::*` bits; 0 = trusted.
     pub mask: Vec<u8>,
+    /// Trusted cells whose |D| is significant (above `moving_sigmas` sigma and
+    /// `moving_min_per_s`); those outside a moving patch are ambiguous.
+    pub disagrees: Vec<bool>,
     pub moving: Vec<bool>,
     pub fused: Vec<f32>,
     pub threat: Vec<ThreatLevel>,
+    /// Per cell: `|n . e|` of the current surface (1 where no plane was fitted).
+    pub incidence_cos: Vec<f32>,
     /// Time between the compared returns, s.
     pub dt_s: Vec<f32>,
     /// Per point: `L_ego`, 1/s (NaN without velocity).
@@ -278,6 +283,7 @@ fn compute_from_surfaces(
         &cur_time,
         &rotated,
         moved.as_ref(),
+        &pair.motion,
     );
     let velocity = pair.motion.velocity_at(current.stamp_ns);
     let l_ego = ego_looming(current, pair);
@@ -297,9 +303,11 @@ fn compute_from_surfaces(
         sigma_per_s: cells.sigma,
         confidence: cells.confidence,
         mask: cells.mask,
+        disagrees: cells.disagrees,
         moving: cells.moving,
         fused: cells.fused,
         threat: cells.threat,
+        incidence_cos: cur_surfaces.incidence_cos.clone(),
         dt_s: cells.dt_s,
         l_ego,
         point_threat,
@@ -368,6 +376,7 @@ struct CellValues {
     sigma: Vec<f32>,
     confidence: Vec<f32>,
     mask: Vec<u8>,
+    disagrees: Vec<bool>,
     moving: Vec<bool>,
     fused: Vec<f32>,
     threat: Vec<ThreatLevel>,
@@ -391,10 +400,19 @@ fn per_cell(
     current_time: &[StampNs],
     rotated: &warp::Rendered,
     moved: Option<&warp::Rendered>,
+    motion: &PairMotion,
 ) -> CellValues {
     let raw: Vec<Raw> = (0..geometry.cells())
         .into_par_iter()
-        .map(|cell| raw_cell(config, current, current_time, rotated, moved, cell))
+        .map(|cell| {
+            let raw = raw_cell(config, current, current_time, rotated, moved, cell);
+            match moved {
+                Some(moved) => {
+                    to_instant(raw, motion, moved.source_time_ns[cell], current_time[cell])
+                }
+                None => raw,
+            }
+        })
         .collect();
     let candidate: Vec<bool> = raw
         .iter()
@@ -470,6 +488,7 @@ fn per_cell(
         sigma: raw.iter().map(|r| r.sigma).collect(),
         mask: raw.iter().map(|r| r.mask).collect(),
         dt_s: raw.iter().map(|r| r.dt_s).collect(),
+        disagrees: candidate,
         moving,
         fused,
         threat,
@@ -579,6 +598,39 @@ fn raw_cell(
     }
 }
 
+/// A difference over `dt` measures the looming of the mean ego velocity over
+/// the interval; reported at the current return's time it is off by
+/// `a dt / (2 h)` when the ego accelerates (braking at 5 m/s^2 at 6.7 m reads
+/// 0.037 1/s high). On a static surface the translation looming scales with
+/// the speed, so `(k - 1) L_ray_ego`, with `k` the current speed over the mean
+/// speed, is that error: removed from both differences, which leaves `D`
+/// unchanged and corrects moving objects for the ego's share of the relative
+/// acceleration.
+fn to_instant(raw: Raw, motion: &PairMotion, source_time_ns: StampNs, time_ns: StampNs) -> Raw {
+    if !raw.l_ray_ego.is_finite() {
+        return raw;
+    }
+    let (Some(before), Some(now)) = (
+        motion.velocity_at(source_time_ns),
+        motion.velocity_at(time_ns),
+    ) else {
+        return raw;
+    };
+    let mean_speed_mps = (0.5 * (before + now)).norm();
+    if mean_speed_mps < MIN_SPEED_FOR_INSTANT_MPS {
+        return raw;
+    }
+    let correction = ((now.norm() / mean_speed_mps - 1.0) * f64::from(raw.l_ray_ego)) as f32;
+    Raw {
+        l_lidar: raw.l_lidar + correction,
+        l_ray_ego: raw.l_ray_ego + correction,
+        ..raw
+    }
+}
+
+/// Below this mean speed the ratio of speeds means nothing.
+const MIN_SPEED_FOR_INSTANT_MPS: f64 = 0.1;
+
 /// Cosine of the largest angle between the current surface and the previous
 /// surface rendered along the same ray (25 degrees).
 const CREASE_COS: f32 = 0.906;
@@ -660,22 +712,13 @@ fn ego_looming(scan: &Scan, pair: &ScanPair) -> Vec<f32> {
 }
 
 /// A point takes its cell's threat level when it is the surface the cell
-/// measured (within 5 % of the cell's range); hidden returns behind it do not.
+/// measured; hidden returns behind it do not.
 fn point_threats(scan: &Scan, image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel> {
-    scan.points_m
-        .iter()
-        .zip(&image.point_cell)
-        .map(|(p, &cell)| {
-            if cell == NO_POINT {
-                return ThreatLevel::None;
-            }
-            let cell = cell as usize;
-            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            if r <= image.range_m[cell] * 1.05 {
-                threat[cell]
-            } else {
-                ThreatLevel::None
-            }
+    (0..scan.points_m.len())
+        .map(|index| {
+            image
+                .surface_cell(scan, index)
+                .map_or(ThreatLevel::None, |cell| threat[cell])
         })
         .collect()
 }

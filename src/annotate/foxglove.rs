@@ -1,0 +1,385 @@
+//! Builders of the Foxglove messages of our output channels (protobuf types of
+//! the `foxglove` crate): point clouds, range images, threat spheres, log lines.
+//! Pure functions of a scan and its engine result.
+
+use foxglove::messages::{
+    Color, KeyValuePair, Log, PackedElementField, PointCloud, Pose, Quaternion, RawImage,
+    SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive, Timestamp, Vector3, log,
+    packed_element_field::NumericType, scene_entity_deletion,
+};
+
+use crate::engine::{PairLooming, ThreatLevel};
+use crate::events::NearMissEvent;
+use crate::messages::{Scan, StampNs};
+
+use super::colour::{self, Rgba};
+
+/// Which per-point fields `/looming/points` carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum FieldSet {
+    /// x, y, z, the fused looming and its colour.
+    #[default]
+    Default,
+    /// Also L_lidar, L_ego, L_ray_ego, D, confidence, threat level and mask.
+    Full,
+}
+
+/// A packed point layout under construction.
+struct Layout {
+    fields: Vec<PackedElementField>,
+    stride: u32,
+}
+
+impl Layout {
+    fn new() -> Self {
+        Self {
+            fields: Vec::new(),
+            stride: 0,
+        }
+    }
+
+    fn add(mut self, name: &str, numeric: NumericType) -> Self {
+        let size = match numeric {
+            NumericType::Uint8 | NumericType::Int8 => 1,
+            NumericType::Uint16 | NumericType::Int16 => 2,
+            NumericType::Float64 => 8,
+            _ => 4,
+        };
+        self.fields.push(PackedElementField {
+            name: name.into(),
+            offset: self.stride,
+            r#type: numeric as i32,
+        });
+        self.stride += size;
+        self
+    }
+
+    /// x, y, z as FLOAT32 first, as both viewers expect.
+    fn xyz() -> Self {
+        Self::new()
+            .add("x", NumericType::Float32)
+            .add("y", NumericType::Float32)
+            .add("z", NumericType::Float32)
+    }
+
+    /// red, green, blue, alpha as UINT8: the names Rerun reads colours from.
+    fn rgba(self) -> Self {
+        self.add("red", NumericType::Uint8)
+            .add("green", NumericType::Uint8)
+            .add("blue", NumericType::Uint8)
+            .add("alpha", NumericType::Uint8)
+    }
+}
+
+/// Appends points field by field, in the layout's order.
+struct Packer {
+    data: Vec<u8>,
+}
+
+impl Packer {
+    fn with_points(stride: u32, points: usize) -> Self {
+        Self {
+            data: Vec::with_capacity(stride as usize * points),
+        }
+    }
+    fn f32(&mut self, value: f32) -> &mut Self {
+        self.data.extend_from_slice(&value.to_le_bytes());
+        self
+    }
+    fn u8(&mut self, value: u8) -> &mut Self {
+        self.data.push(value);
+        self
+    }
+    /// Positions rounded to [`POSITION_QUANTUM_M`].
+    fn xyz(&mut self, p: &[f32; 3]) -> &mut Self {
+        let q = |v: f32| (v / POSITION_QUANTUM_M).round() * POSITION_QUANTUM_M;
+        self.f32(q(p[0])).f32(q(p[1])).f32(q(p[2]))
+    }
+    fn rgba(&mut self, c: Rgba) -> &mut Self {
+        self.data.extend_from_slice(&c);
+        self
+    }
+}
+
+pub fn timestamp(stamp_ns: StampNs) -> Timestamp {
+    let ns = stamp_ns.max(0) as u64;
+    let sec = u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX);
+    Timestamp::new(sec, (ns % 1_000_000_000) as u32)
+}
+
+/// The cloud's pose in its frame: the input cloud's (identity for
+/// PointCloud2), always given in full (Rerun needs position and orientation).
+fn pose_of(scan: &Scan) -> Pose {
+    let t = scan.sensor_pose.translation.vector;
+    let q = scan.sensor_pose.rotation.quaternion();
+    Pose {
+        position: Some(Vector3 {
+            x: t.x,
+            y: t.y,
+            z: t.z,
+        }),
+        orientation: Some(Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        }),
+    }
+}
+
+fn cloud(scan: &Scan, layout: Layout, data: Vec<u8>) -> PointCloud {
+    PointCloud {
+        timestamp: Some(timestamp(scan.stamp_ns)),
+        frame_id: scan.frame_id.clone(),
+        pose: Some(pose_of(scan)),
+        point_stride: layout.stride,
+        fields: layout.fields,
+        data: data.into(),
+    }
+}
+
+/// Per point of the current scan: its surface cell when that cell's values
+/// are trusted (unmasked), else `None`.
+fn trusted_cell(scan: &Scan, looming: &PairLooming, index: usize) -> Option<usize> {
+    looming
+        .image
+        .surface_cell(scan, index)
+        .filter(|&cell| looming.mask[cell] == 0)
+}
+
+/// Positions are rounded to 1/1024 m (at most 0.5 mm away, against 20 mm of
+/// range noise): the zeroed low mantissa bits compress, and the clouds are
+/// most of the output.
+pub const POSITION_QUANTUM_M: f32 = 1.0 / 1024.0;
+
+/// Looming values in point fields are rounded to 1/1024 1/s, far below their
+/// noise (about 0.01 1/s): the zeroed low mantissa bits let zstd shrink the
+/// field to a fraction.
+pub const LOOMING_QUANTUM_PER_S: f32 = 1.0 / 1024.0;
+
+fn quantized(looming_per_s: f32) -> f32 {
+    (looming_per_s / LOOMING_QUANTUM_PER_S).round() * LOOMING_QUANTUM_PER_S
+}
+
+/// `/looming/points`: every point of the scan with its fused looming (NaN
+/// where untrusted) and colour.
+pub fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> PointCloud {
+    let mut layout = Layout::xyz().add("looming", NumericType::Float32).rgba();
+    if fields == FieldSet::Full {
+        layout = layout
+            .add("l_lidar", NumericType::Float32)
+            .add("l_ego", NumericType::Float32)
+            .add("l_ray_ego", NumericType::Float32)
+            .add("disagreement", NumericType::Float32)
+            .add("confidence", NumericType::Float32)
+            .add("threat", NumericType::Uint8)
+            .add("mask", NumericType::Uint8);
+    }
+    let mut out = Packer::with_points(layout.stride, scan.points_m.len());
+    for (index, p) in scan.points_m.iter().enumerate() {
+        let trusted = trusted_cell(scan, looming, index);
+        let fused = trusted.map_or(f32::NAN, |cell| quantized(looming.fused[cell]));
+        out.xyz(p).f32(fused).rgba(colour::looming(fused));
+        if fields == FieldSet::Full {
+            let cell = looming.image.surface_cell(scan, index);
+            let at = |values: &[f32]| cell.map_or(f32::NAN, |c| quantized(values[c]));
+            out.f32(at(&looming.l_lidar))
+                .f32(quantized(looming.l_ego[index]))
+                .f32(at(&looming.l_ray_ego))
+                .f32(at(&looming.disagreement))
+                .f32(at(&looming.confidence))
+                .u8(looming.point_threat[index] as u8)
+                .u8(cell.map_or(crate::engine::mask::EMPTY, |c| looming.mask[c]));
+        }
+    }
+    cloud(scan, layout, out.data)
+}
+
+/// `/looming/disagreement`: the points of moving patches, with `D` and its colour.
+pub fn disagreement_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
+    let layout = Layout::xyz()
+        .add("disagreement", NumericType::Float32)
+        .rgba();
+    let mut out = Packer::with_points(layout.stride, 0);
+    for (index, p) in scan.points_m.iter().enumerate() {
+        let Some(cell) = trusted_cell(scan, looming, index) else {
+            continue;
+        };
+        if looming.moving[cell] {
+            let d = quantized(looming.disagreement[cell]);
+            out.xyz(p).f32(d).rgba(colour::looming(d));
+        }
+    }
+    cloud(scan, layout, out.data)
+}
+
+/// `/looming/threat`: the points at low, medium or high threat, with their
+/// level, fused looming and the level's colour.
+pub fn threat_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
+    let layout = Layout::xyz()
+        .add("looming", NumericType::Float32)
+        .add("level", NumericType::Uint8)
+        .rgba();
+    let mut out = Packer::with_points(layout.stride, 0);
+    for (index, p) in scan.points_m.iter().enumerate() {
+        let level = looming.point_threat[index];
+        if level == ThreatLevel::None {
+            continue;
+        }
+        let fused = looming
+            .image
+            .surface_cell(scan, index)
+            .map_or(f32::NAN, |cell| quantized(looming.fused[cell]));
+        out.xyz(p)
+            .f32(fused)
+            .u8(level as u8)
+            .rgba(colour::threat(level));
+    }
+    cloud(scan, layout, out.data)
+}
+
+/// A per-cell quantity as an `rgb8` range image: rows are beams (the highest
+/// at the top), columns azimuth (straight ahead at the centre, the left to the
+/// left, as seen from the driver's seat); black where there is no return,
+/// grey where masked.
+pub fn range_image(scan: &Scan, looming: &PairLooming, values: &[f32]) -> RawImage {
+    let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
+    let mut data = Vec::with_capacity(rows * cols * 3);
+    for image_row in 0..rows {
+        // Row 0 of the engine is the lowest beam.
+        let row = rows - 1 - image_row;
+        for image_col in 0..cols {
+            // Engine columns run clockwise from behind, so the left is at
+            // small column numbers: already the driver's view.
+            let cell = row * cols + image_col;
+            let c = if looming.image.point[cell] == crate::engine::NO_POINT {
+                colour::EMPTY
+            } else if looming.mask[cell] != 0 {
+                colour::MASKED
+            } else {
+                colour::looming(values[cell])
+            };
+            data.extend_from_slice(&c[..3]);
+        }
+    }
+    RawImage {
+        timestamp: Some(timestamp(scan.stamp_ns)),
+        frame_id: scan.frame_id.clone(),
+        width: cols as u32,
+        height: rows as u32,
+        encoding: "rgb8".into(),
+        step: cols as u32 * 3,
+        data: data.into(),
+    }
+}
+
+/// Entity ids of the three spheres.
+pub const ZONE_IDS: [&str; 3] = ["threat_zone_low", "threat_zone_medium", "threat_zone_high"];
+
+/// `/looming/threat_zones`: the equal-looming spheres of the three levels, or,
+/// without a velocity, the deletion of the previous ones.
+pub fn threat_zones(scan: &Scan, looming: &PairLooming, ttc_s: &[f64; 3]) -> SceneUpdate {
+    let Some(spheres) = &looming.spheres else {
+        return SceneUpdate {
+            deletions: vec![SceneEntityDeletion {
+                timestamp: Some(timestamp(scan.stamp_ns)),
+                r#type: scene_entity_deletion::Type::All as i32,
+                id: String::new(),
+            }],
+            entities: Vec::new(),
+        };
+    };
+    let entities = spheres
+        .iter()
+        .zip(ZONE_IDS)
+        .zip(ttc_s)
+        .map(|((sphere, id), ttc)| {
+            let [r, g, b, a] = colour::threat_zone(sphere.level);
+            let diameter_m = 2.0 * sphere.radius_m;
+            SceneEntity {
+                timestamp: Some(timestamp(scan.stamp_ns)),
+                frame_id: scan.frame_id.clone(),
+                id: id.into(),
+                lifetime: None,
+                frame_locked: true,
+                metadata: vec![
+                    key_value("level", &format!("{:?}", sphere.level).to_lowercase()),
+                    key_value("time_to_contact_s", &format!("{ttc}")),
+                    key_value("looming_per_s", &format!("{:.4}", sphere.looming_per_s)),
+                    key_value("radius_m", &format!("{:.3}", sphere.radius_m)),
+                ],
+                spheres: vec![SpherePrimitive {
+                    pose: Some(Pose {
+                        position: Some(Vector3 {
+                            x: sphere.center_m[0],
+                            y: sphere.center_m[1],
+                            z: sphere.center_m[2],
+                        }),
+                        orientation: Some(Quaternion {
+                            x: 0.0,
+                            y: 0.0,
+                            z: 0.0,
+                            w: 1.0,
+                        }),
+                    }),
+                    size: Some(Vector3 {
+                        x: diameter_m,
+                        y: diameter_m,
+                        z: diameter_m,
+                    }),
+                    color: Some(Color { r, g, b, a }),
+                }],
+                ..SceneEntity::default()
+            }
+        })
+        .collect();
+    SceneUpdate {
+        deletions: Vec::new(),
+        entities,
+    }
+}
+
+fn key_value(key: &str, value: &str) -> KeyValuePair {
+    KeyValuePair {
+        key: key.into(),
+        value: value.into(),
+    }
+}
+
+/// `/looming/log`: one warning line announcing a near-miss event.
+pub fn event_log(event: &NearMissEvent) -> Log {
+    Log {
+        timestamp: Some(timestamp(event.start_ns)),
+        level: log::Level::Warning as i32,
+        message: event_summary(event),
+        name: "looming.events".into(),
+        file: String::new(),
+        line: 0,
+    }
+}
+
+/// One line describing an event, for the log channel and the CLI summary.
+pub fn event_summary(event: &NearMissEvent) -> String {
+    let side = match event.peak.azimuth_deg {
+        a if a > 2.0 => format!("{a:.0} deg left"),
+        a if a < -2.0 => format!("{:.0} deg right", -a),
+        _ => "ahead".into(),
+    };
+    let speed = event
+        .peak
+        .ego_speed_mps
+        .map_or(String::new(), |v| format!(", ego {v:.1} m/s"));
+    format!(
+        "near miss #{}: min time to contact {:.2} s (looming {:.2} 1/s), {} at {:.1} m, {} object{}, {:.1} s long ({} scans)",
+        event.id,
+        event.min_time_to_contact_s,
+        event.peak_looming_per_s,
+        side,
+        event.peak.range_m,
+        if event.moving { "moving" } else { "static" },
+        speed,
+        event.duration_s,
+        event.hot_pairs,
+    )
+}

@@ -1,0 +1,283 @@
+//! The annotation stage: runs the engine on each scan pair, detects near-miss
+//! events, and encodes the `/looming/*` output channels (documented in
+//! `docs/channels.md`). Knows nothing of files: it returns encoded messages
+//! for the writer.
+
+pub mod colour;
+pub mod foxglove;
+
+use std::time::Instant;
+
+use ::foxglove::Encode;
+use prost::Message;
+
+use crate::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
+use crate::events::{EVENT_SCHEMA, EventConfig, EventDetector, NearMissEvent, PairFrame};
+use crate::output::OwnChannelSpec;
+use crate::pairing::ScanPair;
+
+pub use self::foxglove::FieldSet;
+
+pub const POINTS_TOPIC: &str = "/looming/points";
+pub const DISAGREEMENT_TOPIC: &str = "/looming/disagreement";
+pub const THREAT_TOPIC: &str = "/looming/threat";
+pub const THREAT_ZONES_TOPIC: &str = "/looming/threat_zones";
+pub const IMAGE_FUSED_TOPIC: &str = "/looming/image/fused";
+pub const IMAGE_DISAGREEMENT_TOPIC: &str = "/looming/image/disagreement";
+pub const EVENTS_TOPIC: &str = "/looming/events";
+pub const LOG_TOPIC: &str = "/looming/log";
+
+/// Settings of the annotation stage.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct AnnotateConfig {
+    pub engine: EngineConfig,
+    pub events: EventConfig,
+    pub fields: FieldSet,
+}
+
+/// One of our channels, in the order they are registered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Channel {
+    Points,
+    Disagreement,
+    Threat,
+    ThreatZones,
+    ImageFused,
+    ImageDisagreement,
+    Events,
+    Log,
+}
+
+const CHANNELS: [Channel; 8] = [
+    Channel::Points,
+    Channel::Disagreement,
+    Channel::Threat,
+    Channel::ThreatZones,
+    Channel::ImageFused,
+    Channel::ImageDisagreement,
+    Channel::Events,
+    Channel::Log,
+];
+
+/// Channel and schema of a Foxglove protobuf message type.
+fn protobuf_spec<T: Encode>(topic: &str) -> OwnChannelSpec {
+    let schema = T::get_schema().expect("foxglove message types carry their schema");
+    OwnChannelSpec {
+        topic: topic.into(),
+        schema_name: schema.name,
+        schema_encoding: schema.encoding,
+        schema_data: schema.data.into_owned(),
+        message_encoding: T::get_message_encoding(),
+    }
+}
+
+impl Channel {
+    fn spec(self) -> OwnChannelSpec {
+        use ::foxglove::messages::{Log, PointCloud, RawImage, SceneUpdate};
+        match self {
+            Channel::Points => protobuf_spec::<PointCloud>(POINTS_TOPIC),
+            Channel::Disagreement => protobuf_spec::<PointCloud>(DISAGREEMENT_TOPIC),
+            Channel::Threat => protobuf_spec::<PointCloud>(THREAT_TOPIC),
+            Channel::ThreatZones => protobuf_spec::<SceneUpdate>(THREAT_ZONES_TOPIC),
+            Channel::ImageFused => protobuf_spec::<RawImage>(IMAGE_FUSED_TOPIC),
+            Channel::ImageDisagreement => protobuf_spec::<RawImage>(IMAGE_DISAGREEMENT_TOPIC),
+            Channel::Events => OwnChannelSpec {
+                topic: EVENTS_TOPIC.into(),
+                schema_name: "looming.NearMissEvent".into(),
+                schema_encoding: "jsonschema".into(),
+                schema_data: EVENT_SCHEMA.as_bytes().to_vec(),
+                message_encoding: "json".into(),
+            },
+            Channel::Log => protobuf_spec::<Log>(LOG_TOPIC),
+        }
+    }
+}
+
+/// The channel specs of the annotation stage, in registration order.
+pub fn channel_specs() -> Vec<OwnChannelSpec> {
+    CHANNELS.iter().map(|c| c.spec()).collect()
+}
+
+/// An encoded message for one of our channels.
+#[derive(Debug, Clone)]
+pub struct OwnMessage {
+    pub channel_id: u16,
+    pub sequence: u32,
+    pub log_time_ns: u64,
+    pub data: Vec<u8>,
+}
+
+/// What the stage did, for the run summary.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct AnnotateStats {
+    /// Pairs the engine computed looming for.
+    pub pairs_annotated: u64,
+    /// Pairs without a usable range image (too few points, no beams found).
+    pub pairs_without_image: u64,
+    /// Pairs without a velocity source: LiDAR-only looming, no L_ego, D,
+    /// moving flags or threat spheres.
+    pub pairs_lidar_only: u64,
+    pub points_written: u64,
+    pub disagreement_points_written: u64,
+    pub threat_points_written: u64,
+    pub events: u64,
+    /// Time spent in the engine, seconds.
+    pub engine_s: f64,
+    /// Smallest event cluster used, cells.
+    pub event_min_cells: Option<usize>,
+}
+
+/// Runs the engine and the event detector over a stream of pairs.
+pub struct Annotator {
+    config: AnnotateConfig,
+    channel_ids: [u16; 8],
+    sequences: [u32; 8],
+    cache: EngineCache,
+    detector: EventDetector,
+    events: Vec<NearMissEvent>,
+    stats: AnnotateStats,
+}
+
+impl Annotator {
+    /// `channel_ids`: the ids the writer gave [`channel_specs`], same order.
+    pub fn new(config: AnnotateConfig, channel_ids: &[u16]) -> Self {
+        let mut ids = [0; 8];
+        ids.copy_from_slice(&channel_ids[..8]);
+        Self {
+            detector: EventDetector::new(config.events.clone()),
+            config,
+            channel_ids: ids,
+            sequences: [0; 8],
+            cache: EngineCache::default(),
+            events: Vec::new(),
+            stats: AnnotateStats::default(),
+        }
+    }
+
+    pub fn stats(&self) -> &AnnotateStats {
+        &self.stats
+    }
+
+    /// Every event so far, in order of id.
+    pub fn events(&self) -> &[NearMissEvent] {
+        &self.events
+    }
+
+    /// The messages of one pair (and of the events that ended before it).
+    pub fn annotate(&mut self, pair: &ScanPair) -> Vec<OwnMessage> {
+        let started = Instant::now();
+        let looming = compute_with_cache(pair, &self.config.engine, &mut self.cache);
+        self.stats.engine_s += started.elapsed().as_secs_f64();
+        let Some(looming) = looming else {
+            self.stats.pairs_without_image += 1;
+            return Vec::new();
+        };
+        self.stats.pairs_annotated += 1;
+        if !looming.availability.ego_velocity {
+            self.stats.pairs_lidar_only += 1;
+        }
+        let mut out = Vec::with_capacity(8);
+        let ended = self.detector.observe(&PairFrame {
+            pair,
+            looming: &looming,
+        });
+        self.stats.event_min_cells = self.detector.min_cells_used();
+        for event in ended {
+            self.push_event(event, &mut out);
+        }
+        self.push_scan_messages(pair, &looming, &mut out);
+        out
+    }
+
+    /// End of the stream: the events still open.
+    pub fn finish(&mut self) -> Vec<OwnMessage> {
+        let mut out = Vec::new();
+        for event in self.detector.finish() {
+            self.push_event(event, &mut out);
+        }
+        out
+    }
+
+    fn push_scan_messages(
+        &mut self,
+        pair: &ScanPair,
+        looming: &PairLooming,
+        out: &mut Vec<OwnMessage>,
+    ) {
+        let scan = &*pair.current;
+        let log_time_ns = pair.current_log_time_ns;
+        let points = foxglove::looming_cloud(scan, looming, self.config.fields);
+        let disagreement = foxglove::disagreement_cloud(scan, looming);
+        let threat = foxglove::threat_cloud(scan, looming);
+        self.stats.points_written += point_count(&points);
+        self.stats.disagreement_points_written += point_count(&disagreement);
+        self.stats.threat_points_written += point_count(&threat);
+        let zones = foxglove::threat_zones(scan, looming, &self.config.engine.threat_ttc_s);
+        let fused_image = foxglove::range_image(scan, looming, &looming.fused);
+        let d_image = foxglove::range_image(scan, looming, &looming.disagreement);
+        self.push(Channel::Points, log_time_ns, points.encode_to_vec(), out);
+        self.push(
+            Channel::Disagreement,
+            log_time_ns,
+            disagreement.encode_to_vec(),
+            out,
+        );
+        self.push(Channel::Threat, log_time_ns, threat.encode_to_vec(), out);
+        self.push(
+            Channel::ThreatZones,
+            log_time_ns,
+            zones.encode_to_vec(),
+            out,
+        );
+        self.push(
+            Channel::ImageFused,
+            log_time_ns,
+            fused_image.encode_to_vec(),
+            out,
+        );
+        self.push(
+            Channel::ImageDisagreement,
+            log_time_ns,
+            d_image.encode_to_vec(),
+            out,
+        );
+    }
+
+    /// An event goes out at the log time of its first hot scan, on both the
+    /// events and the log channel.
+    fn push_event(&mut self, event: NearMissEvent, out: &mut Vec<OwnMessage>) {
+        let json = serde_json::to_vec(&event).expect("events always serialise");
+        let line = foxglove::event_log(&event).encode_to_vec();
+        self.push(Channel::Events, event.start_log_time_ns, json, out);
+        self.push(Channel::Log, event.start_log_time_ns, line, out);
+        self.stats.events += 1;
+        self.events.push(event);
+    }
+
+    fn push(
+        &mut self,
+        channel: Channel,
+        log_time_ns: u64,
+        data: Vec<u8>,
+        out: &mut Vec<OwnMessage>,
+    ) {
+        let slot = CHANNELS
+            .iter()
+            .position(|c| *c == channel)
+            .expect("every channel is listed");
+        out.push(OwnMessage {
+            channel_id: self.channel_ids[slot],
+            sequence: self.sequences[slot],
+            log_time_ns,
+            data,
+        });
+        self.sequences[slot] += 1;
+    }
+}
+
+fn point_count(cloud: &::foxglove::messages::PointCloud) -> u64 {
+    if cloud.point_stride == 0 {
+        return 0;
+    }
+    (cloud.data.len() / cloud.point_stride as usize) as u64
+}

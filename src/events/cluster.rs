@@ -1,0 +1,276 @@
+//! One pair's hot clusters: connected cells of the range image whose fused
+//! looming is above the event threshold, on surfaces facing the sensor, in the
+//! ego vehicle's corridor.
+
+use nalgebra::Vector3;
+
+use crate::engine::{ImageGeometry, NO_POINT, PairLooming, mask};
+use crate::messages::Scan;
+
+use super::EventConfig;
+use super::corridor::Corridor;
+
+/// A connected set of hot cells in one pair.
+#[derive(Debug, Clone)]
+pub struct Cluster {
+    pub cells: usize,
+    pub rows: (usize, usize),
+    pub cols: ColSpan,
+    /// Median looming of the cluster's cells, 1/s: what neither noise nor
+    /// edge spikes set.
+    pub looming_per_s: f64,
+    /// Mean point of the cluster, LiDAR frame, metres.
+    pub centroid_m: [f64; 3],
+    /// Median range of its cells, metres.
+    pub range_m: f64,
+    /// Smallest distance of its cells from the ego path, metres.
+    pub lateral_offset_m: f64,
+    /// Cells flagged moving by the disagreement.
+    pub moving_cells: usize,
+}
+
+impl Cluster {
+    /// Azimuth (left positive) and elevation of the centroid, degrees.
+    pub fn bearing_deg(&self) -> (f64, f64) {
+        let [x, y, z] = self.centroid_m;
+        (y.atan2(x).to_degrees(), z.atan2(x.hypot(y)).to_degrees())
+    }
+}
+
+/// A run of columns on the circle of azimuths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ColSpan {
+    pub start: usize,
+    pub len: usize,
+    pub cols: usize,
+}
+
+impl ColSpan {
+    /// The shortest span holding every column of `occupied` (sorted, unique).
+    fn covering(occupied: &[usize], cols: usize) -> Self {
+        // The largest gap between occupied columns, going round the circle,
+        // is what the span leaves out.
+        let n = occupied.len();
+        let mut best_gap = 0;
+        let mut start = occupied[0];
+        for i in 0..n {
+            let here = occupied[i];
+            let next = occupied[(i + 1) % n];
+            let gap = (next + cols - here - 1) % cols;
+            let gap = if n == 1 { cols - 1 } else { gap };
+            if gap > best_gap {
+                best_gap = gap;
+                start = next;
+            }
+        }
+        Self {
+            start,
+            len: cols - best_gap,
+            cols,
+        }
+    }
+
+    /// Whether the spans, each widened by `margin` columns on both sides, meet.
+    pub fn overlaps(&self, other: &ColSpan, margin: usize) -> bool {
+        let cols = self.cols as i64;
+        let (a0, alen) = (
+            self.start as i64 - margin as i64,
+            (self.len + 2 * margin) as i64,
+        );
+        let (b0, blen) = (other.start as i64, other.len as i64);
+        if alen >= cols || blen >= cols {
+            return true;
+        }
+        // Offset of b's start from a's start, on the circle.
+        let d = (b0 - a0).rem_euclid(cols);
+        d < alen || d + blen > cols
+    }
+}
+
+/// Cells within reach of the event threshold (at least
+/// [`CANDIDATE_FRACTION`] of it) on a surface facing the sensor, grouped by
+/// 8-connectivity (see [`event_looming`] for the cells that take part); the
+/// clusters whose median looming reaches the threshold. Judging the median of
+/// a region rather than counting cells above the threshold keeps noise from
+/// lifting a face that looms just below it, and edge spikes from setting it; the clusters of at
+/// least `min_cells` cells that reach into the corridor. The whole object
+/// counts once part of it is in the path, so an object entering the corridor
+/// is seen at its full size.
+pub fn hot_clusters(
+    looming: &PairLooming,
+    scan: &Scan,
+    corridor: &Corridor,
+    config: &EventConfig,
+    min_cells: usize,
+) -> Vec<Cluster> {
+    let geometry = &looming.geometry;
+    let threshold_per_s = 1.0 / config.ttc_threshold_s;
+    let candidate_per_s = CANDIDATE_FRACTION * threshold_per_s;
+    let position = |cell: usize| -> Option<Vector3<f64>> {
+        let index = looming.image.point[cell];
+        (index != NO_POINT).then(|| {
+            let p = scan.points_m[index as usize];
+            Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+        })
+    };
+    let hot: Vec<bool> = (0..geometry.cells())
+        .map(|cell| {
+            event_looming(looming, cell).is_some_and(|l| l >= candidate_per_s)
+                && f64::from(looming.incidence_cos[cell]) >= config.facing_cos
+                && position(cell).is_some()
+        })
+        .collect();
+    connected_components(geometry, &hot)
+        .into_iter()
+        .filter(|cells| cells.len() >= min_cells)
+        .map(|cells| describe(looming, corridor, &cells, &position))
+        // An object covers an area; a line of cells one beam or one column
+        // wide is the trace of an edge or of the sweep's seam.
+        .filter(|cluster| cluster.rows.1 > cluster.rows.0 && cluster.cols.len >= 2)
+        .filter(|cluster| {
+            cluster.looming_per_s >= threshold_per_s
+                && cluster.lateral_offset_m <= config.corridor_half_width_m
+        })
+        .collect()
+}
+
+/// Trusted cells a cluster needs for its value to come from them alone.
+const MIN_TRUSTED_CELLS: usize = 3;
+
+/// Cells down to this fraction of the threshold join a cluster, whose median
+/// then decides.
+pub const CANDIDATE_FRACTION: f64 = 0.8;
+
+/// The flaw that leaves a cell's measured `L_lidar` usable: a neighbour on
+/// another surface. (Without an ego prediction the surface is newly in view,
+/// and the difference may straddle a silhouette.)
+const MEASURABLE: u8 = mask::EDGE;
+
+/// The looming a cell contributes to an event: the fused value of a trusted
+/// cell, unless it is ambiguous (a significant disagreement outside any
+/// moving patch: static world or mover, its fused value is neither); for a
+/// cell whose only flaws are [`MEASURABLE`], its measured `L_lidar` (right on
+/// moving objects, where the fused value of an edge cell falls back on the
+/// static-world prediction). At 32 x 512 a pedestrian 14 m away is four
+/// columns wide, all of them edge cells.
+fn event_looming(looming: &PairLooming, cell: usize) -> Option<f64> {
+    let flags = looming.mask[cell];
+    let value = if flags == 0 {
+        if looming.disagrees[cell] && !looming.moving[cell] {
+            return None;
+        }
+        looming.fused[cell]
+    } else if flags & !MEASURABLE == 0 {
+        looming.l_lidar[cell]
+    } else {
+        return None;
+    };
+    value.is_finite().then_some(f64::from(value))
+}
+
+/// Components of the hot cells under 8-connectivity (columns wrap).
+fn connected_components(geometry: &ImageGeometry, hot: &[bool]) -> Vec<Vec<usize>> {
+    let mut seen = vec![false; hot.len()];
+    let mut components = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..hot.len() {
+        if !hot[start] || seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        stack.push(start);
+        let mut cells = Vec::new();
+        while let Some(cell) = stack.pop() {
+            cells.push(cell);
+            for n in geometry.neighbours(cell, 1, 1) {
+                if hot[n] && !seen[n] {
+                    seen[n] = true;
+                    stack.push(n);
+                }
+            }
+        }
+        cells.sort_unstable();
+        components.push(cells);
+    }
+    components
+}
+
+fn describe(
+    looming: &PairLooming,
+    corridor: &Corridor,
+    cells: &[usize],
+    position: &dyn Fn(usize) -> Option<Vector3<f64>>,
+) -> Cluster {
+    let cols = looming.geometry.cols;
+    // Trusted cells set the value when there are a few; edge cells only when
+    // the object is all edges (small or far at a coarse resolution): near
+    // corners an edge cell mixes two faces.
+    let trusted: Vec<usize> = cells
+        .iter()
+        .copied()
+        .filter(|&c| looming.mask[c] == 0)
+        .collect();
+    let valued = if trusted.len() >= MIN_TRUSTED_CELLS {
+        &trusted[..]
+    } else {
+        cells
+    };
+    let mut values: Vec<f64> = valued
+        .iter()
+        .filter_map(|&c| event_looming(looming, c))
+        .collect();
+    values.sort_unstable_by(f64::total_cmp);
+    let mut ranges: Vec<f64> = cells
+        .iter()
+        .map(|&c| f64::from(looming.image.range_m[c]))
+        .collect();
+    ranges.sort_unstable_by(f64::total_cmp);
+    let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
+    let centroid = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
+    let lateral_offset_m = points
+        .iter()
+        .map(|p| corridor.offset_m(p))
+        .fold(f64::INFINITY, f64::min);
+    let mut occupied: Vec<usize> = cells.iter().map(|&c| c % cols).collect();
+    occupied.sort_unstable();
+    occupied.dedup();
+    let rows = cells.iter().map(|&c| c / cols);
+    Cluster {
+        cells: cells.len(),
+        rows: (rows.clone().min().unwrap_or(0), rows.max().unwrap_or(0)),
+        cols: ColSpan::covering(&occupied, cols),
+        looming_per_s: values[values.len() / 2],
+        centroid_m: [centroid.x, centroid.y, centroid.z],
+        range_m: ranges[ranges.len() / 2],
+        lateral_offset_m,
+        moving_cells: cells.iter().filter(|&&c| looming.moving[c]).count(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spans_cover_their_columns_the_short_way_round() {
+        let span = ColSpan::covering(&[3, 4, 5], 16);
+        assert_eq!((span.start, span.len), (3, 3));
+        let wrapped = ColSpan::covering(&[0, 1, 14, 15], 16);
+        assert_eq!((wrapped.start, wrapped.len), (14, 4));
+        let single = ColSpan::covering(&[7], 16);
+        assert_eq!((single.start, single.len), (7, 1));
+    }
+
+    #[test]
+    fn spans_overlap_across_the_seam_and_with_a_margin() {
+        let a = ColSpan::covering(&[14, 15, 0], 16);
+        let b = ColSpan::covering(&[1, 2], 16);
+        assert!(!a.overlaps(&b, 0));
+        assert!(a.overlaps(&b, 1));
+        assert!(b.overlaps(&a, 1));
+        let far = ColSpan::covering(&[7, 8], 16);
+        assert!(!a.overlaps(&far, 2));
+        assert!(!far.overlaps(&a, 2));
+        assert!(far.overlaps(&a, 6));
+    }
+}

@@ -1,0 +1,455 @@
+//! Near-miss events (METHOD.md, "Near-miss events"): a spatially coherent
+//! cluster of trusted cells whose fused looming stays above the event
+//! threshold for several consecutive scan pairs, inside the ego corridor.
+//!
+//! Pure logic: the detector takes each pair's engine result and returns the
+//! events that have ended; the pipeline writes them.
+
+mod cluster;
+mod corridor;
+mod listing;
+
+use serde::{Deserialize, Serialize};
+
+use crate::engine::{ImageGeometry, PairLooming};
+use crate::messages::Scan;
+use crate::pairing::ScanPair;
+
+pub use cluster::{Cluster, ColSpan, hot_clusters};
+pub use corridor::{Corridor, PathSource};
+pub use listing::{ListingError, events_table, read_events};
+
+/// Schema of one event (`/looming/events` and the `--events` file's entries).
+pub const EVENT_SCHEMA: &str = include_str!("../../schemas/looming.NearMissEvent.schema.json");
+/// Schema of the `--events` file.
+pub const EVENTS_FILE_SCHEMA: &str =
+    include_str!("../../schemas/looming.NearMissEvents.schema.json");
+
+/// Scan times kept per event (an event longer than this keeps its first ones).
+const MAX_SCAN_TIMES: usize = 600;
+
+/// Event detection settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EventConfig {
+    /// A cell is hot when its fused looming reaches `1 / ttc_threshold_s`.
+    pub ttc_threshold_s: f64,
+    /// Smallest cluster, cells [default: [`default_min_cells`]].
+    pub min_cells: Option<usize>,
+    /// Consecutive pairs a cluster must last to become an event.
+    pub min_pairs: u64,
+    /// Pairs an event may miss without ending (one noisy scan does not split it).
+    pub max_gap_pairs: u64,
+    /// Half width of the ego corridor, metres: vehicle half width plus clearance.
+    pub corridor_half_width_m: f64,
+    /// Only surfaces facing the sensor this much (`|n . e|`) count: near
+    /// grazing, range along a ray changes fast without anything approaching.
+    pub facing_cos: f64,
+}
+
+impl Default for EventConfig {
+    fn default() -> Self {
+        Self {
+            ttc_threshold_s: 1.5,
+            min_cells: None,
+            min_pairs: 2,
+            max_gap_pairs: 1,
+            // A 2 m wide car (1 m) plus 1 m of clearance.
+            corridor_half_width_m: 2.0,
+            facing_cos: 0.5,
+        }
+    }
+}
+
+/// Side of the square face whose image, at [`REFERENCE_RANGE_M`], sets the
+/// default smallest cluster.
+pub const REFERENCE_FACE_M: f64 = 0.3;
+pub const REFERENCE_RANGE_M: f64 = 10.0;
+
+/// The cells a 0.3 m square face covers at 10 m (at least 3): about 40 on a
+/// 64 x 2048 image, 5 on 32 x 512. Scales with the sensor's resolution so a
+/// pedestrian-sized object is found at any resolution while a few noisy cells
+/// are not.
+pub fn default_min_cells(geometry: &ImageGeometry) -> usize {
+    let angle_rad = 2.0 * (REFERENCE_FACE_M / 2.0 / REFERENCE_RANGE_M).atan();
+    let col_step_rad = std::f64::consts::TAU / geometry.cols as f64;
+    let elevations = &geometry.beams.elevations_rad;
+    let row_step_rad = match (elevations.first(), elevations.last()) {
+        (Some(lo), Some(hi)) if elevations.len() > 1 => (hi - lo) / (elevations.len() - 1) as f64,
+        _ => col_step_rad,
+    };
+    let cells = (angle_rad / col_step_rad) * (angle_rad / row_step_rad.max(1e-6));
+    (cells.round() as usize).max(3)
+}
+
+/// One near-miss event.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NearMissEvent {
+    /// 1-based, in order of confirmation.
+    pub id: u32,
+    /// Stamp (header time) of the first hot scan, ns.
+    pub start_ns: i64,
+    /// Stamp of the last hot scan plus its pair's period: the end of its sweep.
+    pub end_ns: i64,
+    /// Log times of the first and last hot scans, ns: where to jump to.
+    pub start_log_time_ns: u64,
+    pub end_log_time_ns: u64,
+    pub duration_s: f64,
+    /// Pairs in which the cluster was hot.
+    pub hot_pairs: u64,
+    /// Largest cluster looming over the event (median over a pair's cluster
+    /// cells), 1/s, and its inverse.
+    pub peak_looming_per_s: f64,
+    pub min_time_to_contact_s: f64,
+    pub peak: EventPeak,
+    /// Largest cluster, cells.
+    pub max_cluster_cells: usize,
+    /// Share of the event's cluster cells flagged moving (by `D`).
+    pub moving_fraction: f64,
+    /// Most of the object moved on its own (`moving_fraction >= 0.5`).
+    pub moving: bool,
+    pub frame_id: String,
+    pub corridor: PathSource,
+    /// Stamps and log times of the hot scans (at most 600).
+    pub scan_stamps_ns: Vec<i64>,
+    pub scan_log_times_ns: Vec<u64>,
+}
+
+/// The pair at which the event's looming peaked.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventPeak {
+    pub stamp_ns: i64,
+    pub log_time_ns: u64,
+    pub looming_per_s: f64,
+    /// Bearing of the cluster's centroid: azimuth (left positive) and
+    /// elevation, degrees, LiDAR frame.
+    pub azimuth_deg: f64,
+    pub elevation_deg: f64,
+    /// Median range of the cluster, metres.
+    pub range_m: f64,
+    /// Cluster centroid, LiDAR frame, metres.
+    pub position_m: [f64; 3],
+    /// Smallest distance of the cluster from the ego path, metres.
+    pub lateral_offset_m: f64,
+    /// LiDAR speed, m/s (absent without a velocity source).
+    pub ego_speed_mps: Option<f64>,
+    pub cluster_cells: usize,
+}
+
+/// The `--events` file.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EventsFile {
+    pub tool_version: String,
+    pub input: String,
+    pub output: String,
+    pub config: EventConfig,
+    /// Smallest cluster used, cells.
+    pub min_cells: Option<usize>,
+    /// Ranked by minimum time to contact, shortest first.
+    pub events: Vec<NearMissEvent>,
+}
+
+/// Events ranked by minimum time to contact (ties: earlier first).
+pub fn rank(events: &mut [NearMissEvent]) {
+    events.sort_by(|a, b| {
+        a.min_time_to_contact_s
+            .total_cmp(&b.min_time_to_contact_s)
+            .then(a.start_ns.cmp(&b.start_ns))
+    });
+}
+
+/// One pair as the detector sees it.
+pub struct PairFrame<'a> {
+    pub pair: &'a ScanPair,
+    pub looming: &'a PairLooming,
+}
+
+/// A cluster followed over pairs.
+struct Track {
+    /// 0 while tentative.
+    id: u32,
+    last_pair: u64,
+    /// Consecutive hot pairs so far (counts towards confirmation).
+    run: u64,
+    cols: ColSpan,
+    rows: (usize, usize),
+    hot_pairs: u64,
+    start: (i64, u64),
+    last: (i64, u64),
+    last_period_ns: i64,
+    peak: EventPeak,
+    max_cells: usize,
+    moving_cells: usize,
+    cells: usize,
+    stamps: Vec<(i64, u64)>,
+}
+
+/// Follows hot clusters over pairs and reports near-miss events.
+pub struct EventDetector {
+    config: EventConfig,
+    frame_id: String,
+    corridor_source: PathSource,
+    tracks: Vec<Track>,
+    next_id: u32,
+    min_cells_used: Option<usize>,
+}
+
+impl EventDetector {
+    pub fn new(config: EventConfig) -> Self {
+        Self {
+            config,
+            frame_id: String::new(),
+            corridor_source: PathSource::EgoMotion,
+            tracks: Vec::new(),
+            next_id: 1,
+            min_cells_used: None,
+        }
+    }
+
+    /// The smallest cluster of the last pair, cells.
+    pub fn min_cells_used(&self) -> Option<usize> {
+        self.min_cells_used
+    }
+
+    pub fn config(&self) -> &EventConfig {
+        &self.config
+    }
+
+    /// Take one pair; returns the events that ended before it.
+    pub fn observe(&mut self, frame: &PairFrame<'_>) -> Vec<NearMissEvent> {
+        let (pair, looming) = (frame.pair, frame.looming);
+        let scan: &Scan = &pair.current;
+        let stamp_ns = scan.stamp_ns;
+        let velocity = pair.motion.velocity_at(stamp_ns);
+        let corridor = Corridor::new(
+            velocity,
+            pair.motion.angular_velocity_at(stamp_ns),
+            self.config.corridor_half_width_m,
+        );
+        self.frame_id.clone_from(&scan.frame_id);
+        self.corridor_source = corridor.source;
+        let min_cells = self
+            .config
+            .min_cells
+            .unwrap_or_else(|| default_min_cells(&looming.geometry));
+        self.min_cells_used = Some(min_cells);
+        let clusters = hot_clusters(looming, scan, &corridor, &self.config, min_cells);
+        let margin = association_margin_cols(&looming.geometry);
+        let mut ended = self.close_stale(pair.index);
+        let sample = Sample {
+            pair_index: pair.index,
+            stamp_ns,
+            log_time_ns: pair.current_log_time_ns,
+            period_ns: ((pair.dt_s * 1e9).round() as i64).max(1),
+            ego_speed_mps: velocity.map(|v| v.norm()),
+        };
+        for cluster in clusters {
+            let matches: Vec<usize> = (0..self.tracks.len())
+                .filter(|&t| self.tracks[t].near(&cluster, margin))
+                .collect();
+            let index = match matches.split_first() {
+                None => {
+                    self.tracks.push(Track::start(&cluster, &sample));
+                    self.tracks.len() - 1
+                }
+                Some((&first, rest)) => {
+                    // One object seen as several clusters before: merge them
+                    // into the oldest (later indices first, so removal keeps
+                    // the indices valid).
+                    for &other in rest.iter().rev() {
+                        let absorbed = self.tracks.remove(other);
+                        self.tracks[first].absorb(absorbed);
+                    }
+                    self.tracks[first].extend(&sample);
+                    self.tracks[first].update(&cluster, &sample);
+                    first
+                }
+            };
+            let track = &mut self.tracks[index];
+            if track.id == 0 && track.run >= self.config.min_pairs {
+                track.id = self.next_id;
+                self.next_id += 1;
+            }
+        }
+        ended.sort_by_key(|e| e.id);
+        ended
+    }
+
+    /// End of the log: every confirmed event still open.
+    pub fn finish(&mut self) -> Vec<NearMissEvent> {
+        let tracks = std::mem::take(&mut self.tracks);
+        let mut events: Vec<NearMissEvent> = tracks
+            .into_iter()
+            .filter(|t| t.id != 0)
+            .map(|t| t.into_event(&self.frame_id, self.corridor_source))
+            .collect();
+        events.sort_by_key(|e| e.id);
+        events
+    }
+
+    /// Tracks not seen for longer than the gap allows end: confirmed ones as
+    /// events, tentative ones silently.
+    fn close_stale(&mut self, pair_index: u64) -> Vec<NearMissEvent> {
+        let max_gap = self.config.max_gap_pairs;
+        let (stale, live): (Vec<Track>, Vec<Track>) =
+            std::mem::take(&mut self.tracks).into_iter().partition(|t| {
+                let allowed = if t.id == 0 { 0 } else { max_gap };
+                pair_index > t.last_pair + 1 + allowed
+            });
+        self.tracks = live;
+        stale
+            .into_iter()
+            .filter(|t| t.id != 0)
+            .map(|t| t.into_event(&self.frame_id, self.corridor_source))
+            .collect()
+    }
+}
+
+/// Columns a cluster may move between pairs and still be the same object:
+/// 3 degrees of azimuth (a 20 deg/s turn moves the scene 2 degrees per scan).
+fn association_margin_cols(geometry: &ImageGeometry) -> usize {
+    let col_deg = 360.0 / geometry.cols as f64;
+    ((3.0 / col_deg).ceil() as usize).max(2)
+}
+
+struct Sample {
+    pair_index: u64,
+    stamp_ns: i64,
+    log_time_ns: u64,
+    period_ns: i64,
+    ego_speed_mps: Option<f64>,
+}
+
+impl Track {
+    fn start(cluster: &Cluster, sample: &Sample) -> Self {
+        let mut track = Self {
+            id: 0,
+            last_pair: sample.pair_index,
+            run: 0,
+            cols: cluster.cols,
+            rows: cluster.rows,
+            hot_pairs: 0,
+            start: (sample.stamp_ns, sample.log_time_ns),
+            last: (sample.stamp_ns, sample.log_time_ns),
+            last_period_ns: sample.period_ns,
+            peak: peak_of(cluster, sample),
+            max_cells: 0,
+            moving_cells: 0,
+            cells: 0,
+            stamps: Vec::new(),
+        };
+        track.extend(sample);
+        track.update(cluster, sample);
+        track
+    }
+
+    /// Whether `cluster` continues this track: its rows and widened columns meet.
+    fn near(&self, cluster: &Cluster, margin_cols: usize) -> bool {
+        let rows_meet = cluster.rows.0 <= self.rows.1 + 2 && self.rows.0 <= cluster.rows.1 + 2;
+        rows_meet && self.cols.overlaps(&cluster.cols, margin_cols)
+    }
+
+    /// Count a hot pair (once per pair, whatever the number of clusters).
+    fn extend(&mut self, sample: &Sample) {
+        let counted = self.hot_pairs > 0;
+        if counted && sample.pair_index <= self.last_pair {
+            return;
+        }
+        self.run = if counted && sample.pair_index == self.last_pair + 1 {
+            self.run + 1
+        } else {
+            1
+        };
+        self.hot_pairs += 1;
+        if self.stamps.len() < MAX_SCAN_TIMES {
+            self.stamps.push((sample.stamp_ns, sample.log_time_ns));
+        }
+        self.last_pair = sample.pair_index;
+        self.last = (sample.stamp_ns, sample.log_time_ns);
+        self.last_period_ns = sample.period_ns;
+    }
+
+    /// Fold a cluster of the current pair in.
+    fn update(&mut self, cluster: &Cluster, sample: &Sample) {
+        self.cols = cluster.cols;
+        self.rows = cluster.rows;
+        self.max_cells = self.max_cells.max(cluster.cells);
+        self.cells += cluster.cells;
+        self.moving_cells += cluster.moving_cells;
+        if cluster.looming_per_s > self.peak.looming_per_s {
+            self.peak = peak_of(cluster, sample);
+        }
+    }
+
+    /// Take over another track of the same object.
+    fn absorb(&mut self, other: Track) {
+        if other.start.0 < self.start.0 {
+            self.start = other.start;
+        }
+        if self.id == 0 || (other.id != 0 && other.id < self.id) {
+            self.id = other.id;
+        }
+        self.run = self.run.max(other.run);
+        self.hot_pairs = self.hot_pairs.max(other.hot_pairs);
+        if other.last_pair > self.last_pair {
+            self.last_pair = other.last_pair;
+            self.last = other.last;
+            self.last_period_ns = other.last_period_ns;
+        }
+        self.max_cells = self.max_cells.max(other.max_cells);
+        self.cells += other.cells;
+        self.moving_cells += other.moving_cells;
+        if other.peak.looming_per_s > self.peak.looming_per_s {
+            self.peak = other.peak;
+        }
+        let mut stamps = std::mem::take(&mut self.stamps);
+        stamps.extend(other.stamps);
+        stamps.sort_unstable();
+        stamps.dedup();
+        stamps.truncate(MAX_SCAN_TIMES);
+        self.stamps = stamps;
+    }
+
+    fn into_event(self, frame_id: &str, corridor: PathSource) -> NearMissEvent {
+        let moving_fraction = if self.cells > 0 {
+            self.moving_cells as f64 / self.cells as f64
+        } else {
+            0.0
+        };
+        let end_ns = self.last.0 + self.last_period_ns;
+        NearMissEvent {
+            id: self.id,
+            start_ns: self.start.0,
+            end_ns,
+            start_log_time_ns: self.start.1,
+            end_log_time_ns: self.last.1,
+            duration_s: (end_ns - self.start.0) as f64 * 1e-9,
+            hot_pairs: self.hot_pairs,
+            peak_looming_per_s: self.peak.looming_per_s,
+            min_time_to_contact_s: 1.0 / self.peak.looming_per_s,
+            max_cluster_cells: self.max_cells,
+            moving_fraction,
+            moving: moving_fraction >= 0.5,
+            frame_id: frame_id.to_string(),
+            corridor,
+            scan_stamps_ns: self.stamps.iter().map(|s| s.0).collect(),
+            scan_log_times_ns: self.stamps.iter().map(|s| s.1).collect(),
+            peak: self.peak,
+        }
+    }
+}
+
+fn peak_of(cluster: &Cluster, sample: &Sample) -> EventPeak {
+    let (azimuth_deg, elevation_deg) = cluster.bearing_deg();
+    EventPeak {
+        stamp_ns: sample.stamp_ns,
+        log_time_ns: sample.log_time_ns,
+        looming_per_s: cluster.looming_per_s,
+        azimuth_deg,
+        elevation_deg,
+        range_m: cluster.range_m,
+        position_m: cluster.centroid_m,
+        lateral_offset_m: cluster.lateral_offset_m,
+        ego_speed_mps: sample.ego_speed_mps,
+        cluster_cells: cluster.cells,
+    }
+}

@@ -1,0 +1,525 @@
+//! The annotated output of `looming process`, through the real binary: every
+//! `/looming/*` channel decodes with the schema it declares (protobuf
+//! descriptors read dynamically with prost-reflect, JSON validated against its
+//! JSON Schema) and holds what the engine computed; near-miss events are found
+//! where the synthetic scenarios plant them and nowhere else; `--replace`.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use common::{FileContents, RawMessage, looming, read_all, scratch, stderr};
+use looming::annotate::colour;
+use looming::engine::{EngineCache, EngineConfig, PairLooming, ThreatLevel, compute_with_cache};
+use looming::pairing::ScanPair;
+use prost_reflect::{DescriptorPool, DynamicMessage, Value};
+
+const POSITION_QUANTUM_M: f32 = looming::annotate::foxglove::POSITION_QUANTUM_M;
+
+fn synth(dir: &Path, scenario: &str, extra: &[&str]) -> PathBuf {
+    let path = dir.join(format!("{scenario}.mcap"));
+    let mut args = vec![
+        "synth",
+        "--scenario",
+        scenario,
+        "--beams",
+        "32",
+        "--columns",
+        "512",
+        "-o",
+        path.to_str().unwrap(),
+        "--force",
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    let out = looming(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    path
+}
+
+fn process(input: &Path, output: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "process",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--force",
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    let out = looming(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// A protobuf message decoded with the descriptor its channel declares.
+fn decode(contents: &FileContents, message: &RawMessage) -> DynamicMessage {
+    let channel = &contents.channels[&message.channel_id];
+    let schema = channel.schema.as_ref().expect("our channels have schemas");
+    assert_eq!(schema.encoding, "protobuf", "{}", channel.topic);
+    assert_eq!(channel.message_encoding, "protobuf");
+    let pool = DescriptorPool::decode(schema.data.as_slice()).expect("a FileDescriptorSet");
+    let descriptor = pool
+        .get_message_by_name(&schema.name)
+        .unwrap_or_else(|| panic!("{} declares {}", channel.topic, schema.name));
+    DynamicMessage::decode(descriptor, message.data.as_slice()).expect("decodes")
+}
+
+fn field<'a>(message: &'a DynamicMessage, name: &str) -> std::borrow::Cow<'a, Value> {
+    message
+        .get_field_by_name(name)
+        .unwrap_or_else(|| panic!("no field {name}"))
+}
+
+fn stamp_ns(message: &DynamicMessage) -> i64 {
+    let ts = field(message, "timestamp");
+    let ts = ts.as_message().unwrap();
+    field(ts, "seconds").as_i64().unwrap() * 1_000_000_000
+        + i64::from(field(ts, "nanos").as_i32().unwrap())
+}
+
+/// A decoded foxglove.PointCloud: field name -> (offset, type), stride, data.
+struct Cloud {
+    fields: BTreeMap<String, (usize, i32)>,
+    stride: usize,
+    data: Vec<u8>,
+    frame_id: String,
+    stamp_ns: i64,
+}
+
+impl Cloud {
+    fn from(message: &DynamicMessage) -> Self {
+        let fields = field(message, "fields")
+            .as_list()
+            .unwrap()
+            .iter()
+            .map(|f| {
+                let f = f.as_message().unwrap();
+                (
+                    field(f, "name").as_str().unwrap().to_string(),
+                    (
+                        field(f, "offset").as_u32().unwrap() as usize,
+                        field(f, "type").as_enum_number().unwrap(),
+                    ),
+                )
+            })
+            .collect();
+        let pose = field(message, "pose");
+        let pose = pose.as_message().unwrap();
+        assert!(pose.has_field_by_name("position") && pose.has_field_by_name("orientation"));
+        Self {
+            fields,
+            stride: field(message, "point_stride").as_u32().unwrap() as usize,
+            data: field(message, "data").as_bytes().unwrap().to_vec(),
+            frame_id: field(message, "frame_id").as_str().unwrap().to_string(),
+            stamp_ns: stamp_ns(message),
+        }
+    }
+
+    fn len(&self) -> usize {
+        assert_eq!(self.data.len() % self.stride, 0);
+        self.data.len() / self.stride
+    }
+
+    fn f32(&self, point: usize, name: &str) -> f32 {
+        let (offset, numeric) = self.fields[name];
+        assert_eq!(numeric, 7, "{name} is FLOAT32");
+        let at = point * self.stride + offset;
+        f32::from_le_bytes(self.data[at..at + 4].try_into().unwrap())
+    }
+
+    fn u8(&self, point: usize, name: &str) -> u8 {
+        let (offset, numeric) = self.fields[name];
+        assert_eq!(numeric, 1, "{name} is UINT8");
+        self.data[point * self.stride + offset]
+    }
+
+    fn rgba(&self, point: usize) -> [u8; 4] {
+        ["red", "green", "blue", "alpha"].map(|c| self.u8(point, c))
+    }
+
+    fn xyz(&self, point: usize) -> [f32; 3] {
+        ["x", "y", "z"].map(|c| self.f32(point, c))
+    }
+}
+
+fn same_f32(a: f32, b: f32) -> bool {
+    (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1.0 / 2048.0
+}
+
+fn close_to_input(written: [f32; 3], input: [f32; 3]) -> bool {
+    (0..3).all(|k| (written[k] - input[k]).abs() <= POSITION_QUANTUM_M / 2.0 + 1e-6)
+}
+
+/// The engine's results for every pair of `input`, by current log time.
+fn engine_results(input: &Path) -> BTreeMap<u64, (ScanPair, PairLooming)> {
+    let mut cache = EngineCache::default();
+    let mut results = BTreeMap::new();
+    looming::replay::replay(input, &mut |_| {}, &mut |pair| {
+        if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
+            results.insert(pair.current_log_time_ns, (pair, result));
+        }
+    })
+    .unwrap();
+    results
+}
+
+fn validator(schema: &str) -> jsonschema::Validator {
+    let schema: serde_json::Value = serde_json::from_str(schema).unwrap();
+    jsonschema::validator_for(&schema).expect("a valid JSON Schema")
+}
+
+#[test]
+fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
+    let dir = scratch("annotate-channels");
+    let input = synth(&dir, "cut-in", &["--start", "2.6", "--duration", "3.6"]);
+    let output = dir.join("out.mcap");
+    let events_path = dir.join("events.json");
+    process(
+        &input,
+        &output,
+        &[
+            "--fields",
+            "full",
+            "--events",
+            events_path.to_str().unwrap(),
+        ],
+    );
+    let contents = read_all(&std::fs::read(&output).unwrap());
+    let engine = engine_results(&input);
+    assert!(engine.len() >= 9, "{} pairs", engine.len());
+    let topics: Vec<&str> = contents
+        .channels
+        .values()
+        .map(|c| c.topic.as_str())
+        .collect();
+    for topic in [
+        "/looming/points",
+        "/looming/disagreement",
+        "/looming/threat",
+        "/looming/threat_zones",
+        "/looming/image/fused",
+        "/looming/image/disagreement",
+        "/looming/events",
+        "/looming/log",
+    ] {
+        assert!(topics.contains(&topic), "{topic} missing: {topics:?}");
+    }
+
+    // Point clouds.
+    let mut moving_points = 0;
+    let mut threat_points = 0;
+    let points = contents.topic_messages("/looming/points");
+    assert_eq!(points.len(), engine.len());
+    for message in &points {
+        let (pair, result) = &engine[&message.log_time];
+        let scan = &pair.current;
+        let cloud = Cloud::from(&decode(&contents, message));
+        assert_eq!(cloud.frame_id, scan.frame_id);
+        assert_eq!(cloud.stamp_ns, scan.stamp_ns);
+        assert_eq!(cloud.len(), scan.points_m.len());
+        for (i, p) in scan.points_m.iter().enumerate() {
+            assert!(close_to_input(cloud.xyz(i), *p));
+            let cell = result.image.surface_cell(scan, i);
+            let trusted = cell.filter(|&c| result.mask[c] == 0);
+            let fused = trusted.map_or(f32::NAN, |c| result.fused[c]);
+            let written = cloud.f32(i, "looming");
+            assert!(same_f32(written, fused), "point {i}: {written} vs {fused}");
+            assert_eq!(cloud.rgba(i), colour::looming(written));
+            let at = |values: &[f32]| cell.map_or(f32::NAN, |c| values[c]);
+            assert!(same_f32(cloud.f32(i, "l_lidar"), at(&result.l_lidar)));
+            assert!(same_f32(cloud.f32(i, "l_ray_ego"), at(&result.l_ray_ego)));
+            assert!(same_f32(
+                cloud.f32(i, "disagreement"),
+                at(&result.disagreement)
+            ));
+            assert!(same_f32(cloud.f32(i, "confidence"), at(&result.confidence)));
+            assert!(same_f32(cloud.f32(i, "l_ego"), result.l_ego[i]));
+            assert_eq!(cloud.u8(i, "threat"), result.point_threat[i] as u8);
+            if trusted.is_some_and(|c| result.moving[c]) {
+                moving_points += 1;
+            }
+            if result.point_threat[i] != ThreatLevel::None {
+                threat_points += 1;
+            }
+        }
+    }
+    let disagreement: Vec<Cloud> = contents
+        .topic_messages("/looming/disagreement")
+        .iter()
+        .map(|m| Cloud::from(&decode(&contents, m)))
+        .collect();
+    let written_moving: usize = disagreement.iter().map(Cloud::len).sum();
+    assert_eq!(written_moving, moving_points);
+    assert!(
+        moving_points > 500,
+        "the cutting-in car moves: {moving_points}"
+    );
+    for cloud in &disagreement {
+        for i in 0..cloud.len() {
+            let d = cloud.f32(i, "disagreement");
+            assert!(d.abs() > 0.15, "only significant disagreement: {d}");
+            assert_eq!(cloud.rgba(i), colour::looming(d));
+        }
+    }
+    let threat: Vec<Cloud> = contents
+        .topic_messages("/looming/threat")
+        .iter()
+        .map(|m| Cloud::from(&decode(&contents, m)))
+        .collect();
+    assert_eq!(threat.iter().map(Cloud::len).sum::<usize>(), threat_points);
+    assert!(threat_points > 100);
+    for cloud in &threat {
+        for i in 0..cloud.len() {
+            let level = cloud.u8(i, "level");
+            let expected = [ThreatLevel::Low, ThreatLevel::Medium, ThreatLevel::High]
+                .into_iter()
+                .find(|l| *l as u8 == level)
+                .expect("a threat level");
+            assert_eq!(cloud.rgba(i), colour::threat(expected));
+        }
+    }
+
+    // Range images: rows are beams with the highest on top, forward at the centre.
+    for (topic, values) in [
+        ("/looming/image/fused", 0),
+        ("/looming/image/disagreement", 1),
+    ] {
+        for message in contents.topic_messages(topic) {
+            let (_, result) = &engine[&message.log_time];
+            let image = decode(&contents, message);
+            let (rows, cols) = (result.geometry.rows, result.geometry.cols);
+            assert_eq!(field(&image, "width").as_u32(), Some(cols as u32));
+            assert_eq!(field(&image, "height").as_u32(), Some(rows as u32));
+            assert_eq!(field(&image, "encoding").as_str(), Some("rgb8"));
+            assert_eq!(field(&image, "step").as_u32(), Some(cols as u32 * 3));
+            let data = field(&image, "data").as_bytes().unwrap().to_vec();
+            assert_eq!(data.len(), rows * cols * 3);
+            let values = if values == 0 {
+                &result.fused
+            } else {
+                &result.disagreement
+            };
+            for cell in (0..rows * cols).step_by(7) {
+                let (row, col) = (cell / cols, cell % cols);
+                let at = ((rows - 1 - row) * cols + col) * 3;
+                let expected = if result.image.point[cell] == looming::engine::NO_POINT {
+                    colour::EMPTY
+                } else if result.mask[cell] != 0 {
+                    colour::MASKED
+                } else {
+                    colour::looming(values[cell])
+                };
+                assert_eq!(data[at..at + 3], expected[..3], "{topic} cell {cell}");
+            }
+        }
+    }
+
+    // Threat zones: the equal-looming spheres of the engine.
+    for message in contents.topic_messages("/looming/threat_zones") {
+        let (_, result) = &engine[&message.log_time];
+        let update = decode(&contents, message);
+        let entities = field(&update, "entities");
+        let entities = entities.as_list().unwrap();
+        let spheres = result.spheres.expect("the drive has a velocity");
+        assert_eq!(entities.len(), 3);
+        for (entity, sphere) in entities.iter().zip(spheres) {
+            let entity = entity.as_message().unwrap();
+            let primitive = field(entity, "spheres");
+            let primitive = primitive.as_list().unwrap()[0]
+                .as_message()
+                .unwrap()
+                .clone();
+            let pose = field(&primitive, "pose");
+            let position = field(pose.as_message().unwrap(), "position");
+            let position = position.as_message().unwrap();
+            let x = field(position, "x").as_f64().unwrap();
+            assert!((x - sphere.center_m[0]).abs() < 1e-9);
+            let size = field(&primitive, "size");
+            let diameter = field(size.as_message().unwrap(), "x").as_f64().unwrap();
+            assert!((diameter - 2.0 * sphere.radius_m).abs() < 1e-9);
+        }
+    }
+
+    // Events: JSON valid against the declared schema, the same in the file
+    // and in the log line.
+    let event_schema = contents
+        .channels
+        .values()
+        .find(|c| c.topic == "/looming/events")
+        .and_then(|c| c.schema.clone())
+        .unwrap();
+    assert_eq!(event_schema.encoding, "jsonschema");
+    let validate_event = validator(std::str::from_utf8(&event_schema.data).unwrap());
+    let events = contents.topic_messages("/looming/events");
+    assert_eq!(events.len(), 1, "the cut-in near miss");
+    let event_json: serde_json::Value = serde_json::from_slice(&events[0].data).unwrap();
+    if let Err(error) = validate_event.validate(&event_json) {
+        panic!("event does not match its schema: {error}");
+    }
+    let file: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
+    let validate_file = validator(include_str!(
+        "../schemas/looming.NearMissEvents.schema.json"
+    ));
+    if let Err(error) = validate_file.validate(&file) {
+        panic!("events file does not match its schema: {error}");
+    }
+    assert_eq!(file["events"][0], event_json);
+    assert_eq!(
+        event_json["start_log_time_ns"].as_u64(),
+        Some(events[0].log_time)
+    );
+    let logs = contents.topic_messages("/looming/log");
+    assert_eq!(logs.len(), 1);
+    let line = decode(&contents, logs[0]);
+    assert!(
+        field(&line, "message")
+            .as_str()
+            .unwrap()
+            .starts_with("near miss #1: min time to contact")
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Start of a window, seconds into the drive.
+fn start_s(stamp_ns: i64) -> f64 {
+    // `looming synth` stamps its drives from 1_700_000_000 s.
+    (stamp_ns - 1_700_000_000_000_000_000) as f64 * 1e-9
+}
+
+#[test]
+fn near_misses_are_reported_where_planted_and_nowhere_else() {
+    let dir = scratch("annotate-events");
+    for scenario in [
+        "cut-in",
+        "crossing",
+        "straight-road",
+        "urban-turn",
+        "follow",
+        "safe-drive",
+    ] {
+        let input = synth(&dir, scenario, &[]);
+        let output = dir.join(format!("{scenario}-out.mcap"));
+        let events_path = dir.join(format!("{scenario}-events.json"));
+        process(
+            &input,
+            &output,
+            &["--events", events_path.to_str().unwrap()],
+        );
+        let file: looming::events::EventsFile =
+            serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
+        let contents = read_all(&std::fs::read(&input).unwrap());
+        let truth: Vec<serde_json::Value> = contents
+            .topic_messages("/truth/events")
+            .iter()
+            .map(|m| serde_json::from_slice(&m.data).unwrap())
+            .collect();
+        let mut found: Vec<&looming::events::NearMissEvent> = file.events.iter().collect();
+        found.sort_by_key(|e| e.start_ns);
+        let summary: Vec<String> = found
+            .iter()
+            .map(|e| {
+                format!(
+                    "{:.2}-{:.2} s TTC {:.2}",
+                    start_s(e.start_ns),
+                    start_s(e.end_ns),
+                    e.min_time_to_contact_s
+                )
+            })
+            .collect();
+        assert_eq!(
+            found.len(),
+            truth.len(),
+            "{scenario}: found {summary:?}, planted {truth:?}"
+        );
+        for (event, planted) in found.iter().zip(&truth) {
+            let planted_start_ns = planted["start_ns"].as_i64().unwrap();
+            // Within one scan (0.1 s) of the planted start.
+            assert!(
+                (event.start_ns - planted_start_ns).abs() <= 100_000_000,
+                "{scenario}: found {summary:?}, planted {truth:?}"
+            );
+            assert!(event.min_time_to_contact_s < 1.5);
+        }
+        match scenario {
+            "cut-in" => {
+                // Peak: 1.008 1/s (TTC 0.99 s) planted; the car moves.
+                let ttc = found[0].min_time_to_contact_s;
+                assert!((ttc - 0.99).abs() < 0.1, "{summary:?}");
+                assert!(found[0].moving, "{:?}", found[0]);
+            }
+            "crossing" => {
+                // The first window (TTC 1.40 s) lies wholly in the corridor;
+                // the second's planted peak (0.29 s) comes after the
+                // pedestrian has left it.
+                let ttc = found[0].min_time_to_contact_s;
+                assert!((ttc - 1.40).abs() < 0.1, "{summary:?}");
+            }
+            _ => {}
+        }
+        if scenario == "cut-in" {
+            // Size: the default output stays within twice the input.
+            let ratio = std::fs::metadata(&output).unwrap().len() as f64
+                / std::fs::metadata(&input).unwrap().len() as f64;
+            assert!(ratio <= 2.0, "output is {ratio:.2} times the input");
+        }
+        // `looming events` lists the same events, ranked.
+        let listed = looming(&["events", output.to_str().unwrap(), "--json"]);
+        assert!(listed.status.success(), "{}", stderr(&listed));
+        let listed: Vec<looming::events::NearMissEvent> =
+            serde_json::from_slice(&listed.stdout).unwrap();
+        assert_eq!(listed, file.events);
+        let _ = std::fs::remove_file(&output);
+        let _ = std::fs::remove_file(&input);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_processed_log_is_refused_unless_replace_which_writes_fresh_channels() {
+    let dir = scratch("annotate-replace");
+    let input = synth(&dir, "cut-in", &["--start", "2.8", "--duration", "3.4"]);
+    let first = dir.join("first.mcap");
+    process(&input, &first, &[]);
+    let refused = looming(&[
+        "process",
+        first.to_str().unwrap(),
+        "-o",
+        dir.join("again.mcap").to_str().unwrap(),
+    ]);
+    assert_eq!(refused.status.code(), Some(2));
+    let message = stderr(&refused);
+    assert!(
+        message.contains("/looming/points") && message.contains("--replace"),
+        "{message}"
+    );
+    let second = dir.join("second.mcap");
+    process(&first, &second, &["--replace"]);
+    let (a, b) = (
+        read_all(&std::fs::read(&first).unwrap()),
+        read_all(&std::fs::read(&second).unwrap()),
+    );
+    // Each of our topics once, with the same messages as the first run.
+    let topics = |c: &FileContents| {
+        let mut t: Vec<String> = c.channels.values().map(|c| c.topic.clone()).collect();
+        t.sort();
+        t
+    };
+    assert_eq!(topics(&a), topics(&b));
+    for topic in topics(&a) {
+        let data = |c: &FileContents| -> Vec<(u64, Vec<u8>)> {
+            c.topic_messages(&topic)
+                .iter()
+                .map(|m| (m.log_time, m.data.clone()))
+                .collect()
+        };
+        assert_eq!(data(&a), data(&b), "{topic}");
+    }
+    assert_eq!(
+        b.metadata.iter().filter(|m| m.name == "looming").count(),
+        1,
+        "one run record"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
