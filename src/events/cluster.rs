@@ -23,6 +23,9 @@ pub struct Cluster {
     pub centroid_m: [f64; 3],
     /// Median range of its cells, metres.
     pub range_m: f64,
+    /// 10th percentile of its cells' ranges, metres: the near side, which
+    /// closes at the closing speed.
+    pub near_range_m: f64,
     /// Smallest distance of its cells from the ego path, metres.
     pub lateral_offset_m: f64,
     /// Cells flagged moving by the disagreement.
@@ -242,6 +245,7 @@ fn describe(
         looming_per_s: values[values.len() / 2],
         centroid_m: [centroid.x, centroid.y, centroid.z],
         range_m: ranges[ranges.len() / 2],
+        near_range_m: ranges[ranges.len() / 10],
         lateral_offset_m,
         moving_cells: cells.iter().filter(|&&c| looming.moving[c]).count(),
     }

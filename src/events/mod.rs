@@ -181,6 +181,8 @@ struct Track {
     moving_cells: usize,
     cells: usize,
     stamps: Vec<(i64, u64)>,
+    /// Near range of the cluster in the last hot pair, with that pair's stamp.
+    last_near_range: (i64, f64),
 }
 
 /// Follows hot clusters over pairs and reports near-miss events.
@@ -243,35 +245,50 @@ impl EventDetector {
             ego_speed_mps: velocity.map(|v| v.norm()),
         };
         for cluster in clusters {
-            let matches: Vec<usize> = (0..self.tracks.len())
-                .filter(|&t| self.tracks[t].near(&cluster, margin))
-                .collect();
-            let index = match matches.split_first() {
-                None => {
-                    self.tracks.push(Track::start(&cluster, &sample));
-                    self.tracks.len() - 1
-                }
-                Some((&first, rest)) => {
-                    // One object seen as several clusters before: merge them
-                    // into the oldest (later indices first, so removal keeps
-                    // the indices valid).
-                    for &other in rest.iter().rev() {
-                        let absorbed = self.tracks.remove(other);
-                        self.tracks[first].absorb(absorbed);
-                    }
-                    self.tracks[first].extend(&sample);
-                    self.tracks[first].update(&cluster, &sample);
-                    first
-                }
-            };
-            let track = &mut self.tracks[index];
-            if track.id == 0 && track.run >= self.config.min_pairs {
-                track.id = self.next_id;
-                self.next_id += 1;
-            }
+            self.take(&cluster, &sample, margin);
         }
         ended.sort_by_key(|e| e.id);
         ended
+    }
+
+    /// Fold one hot cluster into the track it continues (merging the tracks
+    /// it joins), or start a track.
+    fn take(&mut self, cluster: &Cluster, sample: &Sample, margin_cols: usize) {
+        let matches: Vec<usize> = (0..self.tracks.len())
+            .filter(|&t| self.tracks[t].near(cluster, margin_cols))
+            .collect();
+        // A cluster looming much faster than its range closes is an artefact
+        // (the corner of a near object, where an edge cell sees two faces),
+        // not an approach: it neither continues nor starts a track.
+        if matches
+            .iter()
+            .any(|&t| !self.tracks[t].plausible(cluster, sample))
+        {
+            return;
+        }
+        let index = match matches.split_first() {
+            None => {
+                self.tracks.push(Track::start(cluster, sample));
+                self.tracks.len() - 1
+            }
+            Some((&first, rest)) => {
+                // One object seen as several clusters before: merge them into
+                // the oldest (later indices first, so removal keeps the
+                // indices valid).
+                for &other in rest.iter().rev() {
+                    let absorbed = self.tracks.remove(other);
+                    self.tracks[first].absorb(absorbed);
+                }
+                self.tracks[first].extend(sample);
+                self.tracks[first].update(cluster, sample);
+                first
+            }
+        };
+        let track = &mut self.tracks[index];
+        if track.id == 0 && track.run >= self.config.min_pairs {
+            track.id = self.next_id;
+            self.next_id += 1;
+        }
     }
 
     /// End of the log: every confirmed event still open.
@@ -303,6 +320,9 @@ impl EventDetector {
             .collect()
     }
 }
+
+/// Slack of the range-rate check, 1/s.
+const PLAUSIBILITY_SLACK_PER_S: f64 = 0.3;
 
 /// Columns a cluster may move between pairs and still be the same object:
 /// 3 degrees of azimuth (a 20 deg/s turn moves the scene 2 degrees per scan).
@@ -336,6 +356,7 @@ impl Track {
             moving_cells: 0,
             cells: 0,
             stamps: Vec::new(),
+            last_near_range: (sample.stamp_ns, cluster.near_range_m),
         };
         track.extend(sample);
         track.update(cluster, sample);
@@ -346,6 +367,19 @@ impl Track {
     fn near(&self, cluster: &Cluster, margin_cols: usize) -> bool {
         let rows_meet = cluster.rows.0 <= self.rows.1 + 2 && self.rows.0 <= cluster.rows.1 + 2;
         rows_meet && self.cols.overlaps(&cluster.cols, margin_cols)
+    }
+
+    /// Whether `cluster`, seen in a later pair, looms no faster than twice
+    /// the rate at which its near range closed since this track's last pair
+    /// (plus 0.3 1/s for the noise of a range percentile).
+    fn plausible(&self, cluster: &Cluster, sample: &Sample) -> bool {
+        let (stamp_ns, near_range_m) = self.last_near_range;
+        let dt_s = (sample.stamp_ns - stamp_ns) as f64 * 1e-9;
+        if dt_s <= 0.0 || cluster.near_range_m <= 0.0 {
+            return true;
+        }
+        let closing_per_s = (near_range_m - cluster.near_range_m) / (dt_s * cluster.near_range_m);
+        cluster.looming_per_s <= 2.0 * closing_per_s + PLAUSIBILITY_SLACK_PER_S
     }
 
     /// Count a hot pair (once per pair, whatever the number of clusters).
@@ -370,6 +404,7 @@ impl Track {
 
     /// Fold a cluster of the current pair in.
     fn update(&mut self, cluster: &Cluster, sample: &Sample) {
+        self.last_near_range = (sample.stamp_ns, cluster.near_range_m);
         self.cols = cluster.cols;
         self.rows = cluster.rows;
         self.max_cells = self.max_cells.max(cluster.cells);
