@@ -12,8 +12,10 @@ use looming::decode::DecodeLimits;
 use looming::engine::EngineConfig;
 use looming::events::EventConfig;
 use looming::input::{InputOptions, ReadMode};
+use looming::kitti::SweepDirection;
 use looming::output::{OutputCompression, OutputOptions};
 use looming::pipeline::{PairingSettings, ProcessConfig, ProcessError, ProgressSink, RunSummary};
+use looming::render::{RenderAt, RenderChannel, RenderOptions, RenderView};
 use looming::topics::TopicOverrides;
 
 const EXIT_CODES: &str = "\
@@ -60,12 +62,81 @@ enum Command {
     /// Measure the engine against ground truth: per quantity and class of cell,
     /// median / p90 |error| and bias, and moving-object precision / recall / F1.
     ///
-    /// FILE must carry /truth/points (a `looming synth` drive, processed or not).
+    /// FILE must carry /truth/points (a `looming synth` drive, processed or
+    /// not), or --truth names a log that does.
     Eval(EvalArgs),
     /// List the near-miss events of an annotated log (its /looming/events),
     /// ranked by minimum time to contact.
     #[command(after_help = EXIT_CODES)]
     Events(EventsArgs),
+    /// Convert a KITTI raw drive folder (Velodyne scans, OXTS, calibration) to a
+    /// ROS 2 MCAP that `process` reads (see docs/kitti.md).
+    #[command(name = "import-kitti", after_help = SYNTH_EXIT_CODES)]
+    ImportKitti(ImportKittiArgs),
+    /// Draw a scan pair's looming as a PNG: the range image (rows = beams,
+    /// forward at the centre) or, with --view top, the cloud from above.
+    #[command(after_help = SYNTH_EXIT_CODES)]
+    Render(RenderArgs),
+}
+
+#[derive(Debug, Args)]
+struct ImportKittiArgs {
+    /// The drive folder, e.g. 2011_09_26/2011_09_26_drive_0005_sync.
+    drive: PathBuf,
+    /// Folder of calib_imu_to_velo.txt [default: the drive folder's parent,
+    /// the date folder].
+    #[arg(long, value_name = "DIR")]
+    calib: Option<PathBuf>,
+    /// Output MCAP file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Which way the scanner turns seen from above, for per-point times
+    /// (KITTI's HDL-64E: counter-clockwise, measured; see docs/kitti.md).
+    #[arg(long, value_enum, default_value_t = SweepDirection::CounterClockwise)]
+    sweep: SweepDirection,
+    /// Most points accepted in one scan.
+    #[arg(long, value_name = "N", default_value_t = 4_000_000)]
+    max_points: usize,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    force: bool,
+    /// No summary on stderr.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Debug, Args)]
+struct RenderArgs {
+    /// A log (annotated or not) with LiDAR scans and, for L_ego, a velocity.
+    file: PathBuf,
+    /// The quantity: fused, lidar (L_lidar, the paper's LiDAR-only looming),
+    /// ego (L_ego, its LiDAR + IMU looming), disagreement (D), threat.
+    #[arg(long, value_enum, default_value_t = RenderChannel::Fused)]
+    channel: RenderChannel,
+    /// Seconds after the log's first message: the first pair at or after.
+    #[arg(long, value_name = "SECONDS", conflicts_with = "frame")]
+    time: Option<f64>,
+    /// Pair number (as /looming/pairs counts them, from 0).
+    #[arg(long, value_name = "N")]
+    frame: Option<u64>,
+    /// range: the range image; top: the coloured cloud from above.
+    #[arg(long, value_enum, default_value_t = RenderView::Range)]
+    view: RenderView,
+    /// Range view: pixel rows per beam.
+    #[arg(long, value_name = "PX", default_value_t = 4)]
+    row_height: u32,
+    /// Top view: metres from the centre to the edge.
+    #[arg(long, value_name = "METRES", default_value_t = 40.0)]
+    extent: f64,
+    /// Top view: image size, pixels.
+    #[arg(long, value_name = "PX", default_value_t = 800)]
+    size: u32,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(Debug, Args)]
@@ -79,6 +150,11 @@ struct EvalArgs {
     /// rotation compensation buys).
     #[arg(long)]
     no_rotation_compensation: bool,
+    /// Take the truth from this log instead (a `looming synth` drive whose
+    /// scans have the same stamps and points, e.g. the one a KITTI-format
+    /// folder was written from); points are matched by exact position.
+    #[arg(long, value_name = "TRUTH.mcap")]
+    truth: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -238,6 +314,15 @@ pub struct Failure {
     pub code: i32,
 }
 
+impl Failure {
+    fn with_code(error: impl Into<anyhow::Error>, code: i32) -> Self {
+        Failure {
+            error: error.into(),
+            code,
+        }
+    }
+}
+
 impl<E: Into<anyhow::Error>> From<E> for Failure {
     fn from(error: E) -> Self {
         Failure {
@@ -254,7 +339,100 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Synth(args) => synth(args),
         Command::Eval(args) => eval(args),
         Command::Events(args) => events(args),
+        Command::ImportKitti(args) => import_kitti(args),
+        Command::Render(args) => render(args),
     }
+}
+
+fn import_kitti(args: ImportKittiArgs) -> Result<(), Failure> {
+    let options = looming::kitti::ImportOptions {
+        drive_dir: args.drive,
+        calib_dir: args.calib,
+        output: args.output,
+        output_options: OutputOptions {
+            force: args.force,
+            ..OutputOptions::default()
+        },
+        max_points: args.max_points,
+        sweep: args.sweep,
+    };
+    let summary = looming::kitti::import_kitti(&options).map_err(|error| {
+        let usage = matches!(
+            &error,
+            looming::kitti::ImportError::Output(looming::output::OutputError::Exists { .. })
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
+    })?;
+    if !args.quiet {
+        eprintln!(
+            "looming import-kitti: {} scans ({} points, {} missing), {} OXTS packets ({} missing), {:.1} MB in {:.2} s -> {}",
+            summary.scans_written,
+            summary.points_written,
+            summary.scans_missing,
+            summary.oxts_written,
+            summary.oxts_missing,
+            summary.output_bytes as f64 / 1e6,
+            summary.elapsed_s,
+            summary.output
+        );
+        eprintln!(
+            "  sweep times   {}; turning {:?}; rings derived in {} of {} scans",
+            summary.sweep_times,
+            summary.sweep_direction,
+            summary.scans_with_rings,
+            summary.scans_written
+        );
+        if let Some(calib) = &summary.calibration {
+            eprintln!("  calibration   {calib}");
+        }
+        for warning in &summary.warnings {
+            eprintln!("  warning       {warning}");
+        }
+    }
+    Ok(())
+}
+
+fn render(args: RenderArgs) -> Result<(), Failure> {
+    let at = match (args.time, args.frame) {
+        (Some(t), _) if t.is_finite() && t >= 0.0 => RenderAt::Time(t),
+        (Some(_), _) => {
+            return Err(Failure {
+                error: anyhow::anyhow!("--time must be a non-negative number of seconds"),
+                code: 2,
+            });
+        }
+        (None, Some(n)) => RenderAt::Frame(n),
+        (None, None) => {
+            return Err(Failure {
+                error: anyhow::anyhow!("give --time SECONDS or --frame N"),
+                code: 2,
+            });
+        }
+    };
+    let options = RenderOptions {
+        input: args.file,
+        output: args.output,
+        channel: args.channel,
+        at,
+        view: args.view,
+        row_height_px: args.row_height.max(1),
+        top_extent_m: args.extent,
+        top_size_px: args.size.max(16),
+        force: args.force,
+    };
+    let summary = looming::render::render(&options).map_err(|error| {
+        let code = if error.is_usage() { 2 } else { 1 };
+        Failure::with_code(error, code)
+    })?;
+    eprintln!(
+        "looming render: pair {} (stamp {}), {} x {} px -> {}",
+        summary.pair_index,
+        looming::pipeline::format_log_time(summary.stamp_ns.max(0) as u64),
+        summary.width_px,
+        summary.height_px,
+        summary.output.display()
+    );
+    Ok(())
 }
 
 fn events(args: EventsArgs) -> Result<(), Failure> {
@@ -273,7 +451,7 @@ fn eval(args: EvalArgs) -> Result<(), Failure> {
         rotation_compensation: !args.no_rotation_compensation,
         ..Default::default()
     };
-    let report = looming::eval::evaluate(&args.file, &config)?;
+    let report = looming::eval::evaluate_against(&args.file, &config, args.truth.as_deref())?;
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
@@ -298,15 +476,12 @@ fn synth(args: SynthArgs) -> Result<(), Failure> {
         },
     };
     let summary = looming::synth::synthesize(&options).map_err(|error| {
-        let code = match &error {
+        let usage = matches!(
+            &error,
             looming::synth::SynthError::Scenario(_)
-            | looming::synth::SynthError::Output(looming::output::OutputError::Exists { .. }) => 2,
-            _ => 1,
-        };
-        Failure {
-            error: error.into(),
-            code,
-        }
+                | looming::synth::SynthError::Output(looming::output::OutputError::Exists { .. })
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
     })?;
     if !args.quiet {
         eprintln!(

@@ -81,13 +81,9 @@ impl Channel {
             Channel::ThreatZones => protobuf_spec::<SceneUpdate>(THREAT_ZONES_TOPIC),
             Channel::ImageFused => protobuf_spec::<RawImage>(IMAGE_FUSED_TOPIC),
             Channel::ImageDisagreement => protobuf_spec::<RawImage>(IMAGE_DISAGREEMENT_TOPIC),
-            Channel::Events => OwnChannelSpec {
-                topic: EVENTS_TOPIC.into(),
-                schema_name: "looming.NearMissEvent".into(),
-                schema_encoding: "jsonschema".into(),
-                schema_data: EVENT_SCHEMA.as_bytes().to_vec(),
-                message_encoding: "json".into(),
-            },
+            Channel::Events => {
+                OwnChannelSpec::json(EVENTS_TOPIC, "looming.NearMissEvent", EVENT_SCHEMA)
+            }
             Channel::Log => protobuf_spec::<Log>(LOG_TOPIC),
         }
     }

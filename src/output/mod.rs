@@ -338,3 +338,28 @@ pub struct OwnChannelSpec {
     pub schema_data: Vec<u8>,
     pub message_encoding: String,
 }
+
+impl OwnChannelSpec {
+    /// A ROS 2 (CDR) channel of `package/msg/type_name` with its definition.
+    pub fn ros2(topic: &str, package: &str, type_name: &str, definition: String) -> Self {
+        let dialect = crate::ros_schemas::RosDialect::Ros2;
+        Self {
+            topic: topic.into(),
+            schema_name: dialect.schema_name(package, type_name),
+            schema_encoding: dialect.schema_encoding().into(),
+            schema_data: definition.into_bytes(),
+            message_encoding: dialect.message_encoding().into(),
+        }
+    }
+
+    /// A JSON channel with its JSON Schema.
+    pub fn json(topic: &str, schema_name: &str, schema: &str) -> Self {
+        Self {
+            topic: topic.into(),
+            schema_name: schema_name.into(),
+            schema_encoding: "jsonschema".into(),
+            schema_data: schema.as_bytes().to_vec(),
+            message_encoding: "json".into(),
+        }
+    }
+}

@@ -13,13 +13,7 @@ const PAIRS_SCHEMA: &str = include_str!("../../schemas/looming.ScanPair.schema.j
 
 /// The channel and schema of `/looming/pairs`.
 pub fn pairs_channel_spec() -> OwnChannelSpec {
-    OwnChannelSpec {
-        topic: PAIRS_TOPIC.into(),
-        schema_name: "looming.ScanPair".into(),
-        schema_encoding: "jsonschema".into(),
-        schema_data: PAIRS_SCHEMA.as_bytes().to_vec(),
-        message_encoding: "json".into(),
-    }
+    OwnChannelSpec::json(PAIRS_TOPIC, "looming.ScanPair", PAIRS_SCHEMA)
 }
 
 /// One `/looming/pairs` message.

@@ -176,6 +176,23 @@ impl Default for Quaternion {
     }
 }
 
+impl From<&nalgebra::Vector3<f64>> for Vector3 {
+    fn from(v: &nalgebra::Vector3<f64>) -> Self {
+        Self::new(v.x, v.y, v.z)
+    }
+}
+
+impl From<&nalgebra::UnitQuaternion<f64>> for Quaternion {
+    fn from(q: &nalgebra::UnitQuaternion<f64>) -> Self {
+        Self {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        }
+    }
+}
+
 impl Quaternion {
     pub const IDENTITY: Self = Self {
         x: 0.0,

@@ -130,27 +130,6 @@ impl<'w> SequencedWriter<'w> {
     }
 }
 
-fn ros_channel(topic: &str, package: &str, type_name: &str, definition: String) -> OwnChannelSpec {
-    let dialect = RosDialect::Ros2;
-    OwnChannelSpec {
-        topic: topic.into(),
-        schema_name: dialect.schema_name(package, type_name),
-        schema_encoding: dialect.schema_encoding().into(),
-        schema_data: definition.into_bytes(),
-        message_encoding: dialect.message_encoding().into(),
-    }
-}
-
-fn json_channel(topic: &str, schema_name: &str, schema: &str) -> OwnChannelSpec {
-    OwnChannelSpec {
-        topic: topic.into(),
-        schema_name: schema_name.into(),
-        schema_encoding: "jsonschema".into(),
-        schema_data: schema.as_bytes().to_vec(),
-        message_encoding: "json".into(),
-    }
-}
-
 impl SynthLog {
     /// Register the channels and queue `/tf_static`; messages start with scan `first_scan`.
     pub fn new(
@@ -161,48 +140,48 @@ impl SynthLog {
         let d = RosDialect::Ros2;
         let mut add = |spec: OwnChannelSpec| writer.add_own_channel(&spec);
         let channels = Channels {
-            lidar: add(ros_channel(
+            lidar: add(OwnChannelSpec::ros2(
                 topics::LIDAR,
                 "sensor_msgs",
                 "PointCloud2",
                 ros_schemas::point_cloud2(d),
             ))?,
-            imu: add(ros_channel(
+            imu: add(OwnChannelSpec::ros2(
                 topics::IMU,
                 "sensor_msgs",
                 "Imu",
                 ros_schemas::imu(d),
             ))?,
-            twist: add(ros_channel(
+            twist: add(OwnChannelSpec::ros2(
                 topics::TWIST,
                 "geometry_msgs",
                 "TwistStamped",
                 ros_schemas::twist_stamped(d),
             ))?,
-            odometry: add(ros_channel(
+            odometry: add(OwnChannelSpec::ros2(
                 topics::ODOMETRY,
                 "nav_msgs",
                 "Odometry",
                 ros_schemas::odometry(d),
             ))?,
-            tf_static: add(ros_channel(
+            tf_static: add(OwnChannelSpec::ros2(
                 topics::TF_STATIC,
                 "tf2_msgs",
                 "TFMessage",
                 ros_schemas::tf_message(d),
             ))?,
-            truth_points: add(ros_channel(
+            truth_points: add(OwnChannelSpec::ros2(
                 topics::TRUTH_POINTS,
                 "sensor_msgs",
                 "PointCloud2",
                 ros_schemas::point_cloud2(d),
             ))?,
-            truth_scan: add(json_channel(
+            truth_scan: add(OwnChannelSpec::json(
                 topics::TRUTH_SCAN,
                 "looming.TruthScan",
                 include_str!("../../schemas/looming.TruthScan.schema.json"),
             ))?,
-            truth_events: add(json_channel(
+            truth_events: add(OwnChannelSpec::json(
                 topics::TRUTH_EVENTS,
                 "looming.TruthEvent",
                 include_str!("../../schemas/looming.TruthEvent.schema.json"),
@@ -355,19 +334,6 @@ fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
     }
 }
 
-fn ros_vector(v: &Vector3<f64>) -> RosVector3 {
-    RosVector3::new(v.x, v.y, v.z)
-}
-
-fn ros_quaternion(q: &UnitQuaternion<f64>) -> Quaternion {
-    Quaternion {
-        x: q.i,
-        y: q.j,
-        z: q.k,
-        w: q.w,
-    }
-}
-
 /// `/imu/data` at `t_s`: gyro and specific force in the vehicle frame, with
 /// seeded Gaussian noise (a generator per sample index: order independent).
 fn imu_message(world: &World, t_s: f64, index: u64, seed: u64) -> Imu {
@@ -392,11 +358,11 @@ fn imu_message(world: &World, t_s: f64, index: u64, seed: u64) -> Imu {
     let diagonal = |v: f64| [v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v];
     Imu {
         header: Header::new(stamp_ns(t_s), VEHICLE_FRAME),
-        orientation: ros_quaternion(&orientation),
+        orientation: Quaternion::from(&orientation),
         orientation_covariance: diagonal(1e-4),
-        angular_velocity: ros_vector(&gyro),
+        angular_velocity: RosVector3::from(&gyro),
         angular_velocity_covariance: diagonal(spec.gyro_noise_radps.powi(2)),
-        linear_acceleration: ros_vector(&force),
+        linear_acceleration: RosVector3::from(&force),
         linear_acceleration_covariance: diagonal(spec.accel_noise_mps2.powi(2)),
     }
 }
@@ -414,8 +380,8 @@ fn velocity_messages(world: &World, t_s: f64) -> (TwistStamped, Odometry) {
         child_frame_id: VEHICLE_FRAME.into(),
         pose: PoseWithCovariance {
             pose: Pose {
-                position: ros_vector(&ego.position_m),
-                orientation: ros_quaternion(&orientation),
+                position: RosVector3::from(&ego.position_m),
+                orientation: Quaternion::from(&orientation),
             },
             covariance: [0.0; 36],
         },
@@ -441,8 +407,8 @@ fn tf_static(world: &World, start_s: f64) -> TFMessage {
             header: Header::new(stamp_ns(start_s), VEHICLE_FRAME),
             child_frame_id: LIDAR_FRAME.into(),
             transform: Transform {
-                translation: ros_vector(&mount.translation.vector),
-                rotation: ros_quaternion(&mount.rotation),
+                translation: RosVector3::from(&mount.translation.vector),
+                rotation: Quaternion::from(&mount.rotation),
             },
         }],
     }

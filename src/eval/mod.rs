@@ -3,7 +3,9 @@
 //! pairs its scans like `process`, runs the engine and compares, per quantity
 //! and per class of cell, with the truth of the same points.
 
-use std::collections::BTreeMap;
+mod external;
+
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use crate::engine::{self, EngineConfig, PairLooming};
@@ -34,6 +36,32 @@ pub enum EvalError {
     NoTruth(String),
     #[error("{0}")]
     Truth(String),
+    #[error("truth reader thread failed")]
+    Internal,
+}
+
+/// The truth of one scan: per input point index, and, when the truth comes
+/// from another log (`--truth`), the index of each point by its exact
+/// position (a KITTI import reorders the points but keeps their float bits).
+#[derive(Debug, Default)]
+pub struct ScanTruth {
+    pub points: Vec<PointTruth>,
+    pub index_by_position: Option<HashMap<[u32; 3], u32>>,
+}
+
+impl ScanTruth {
+    fn of(&self, scan: &Scan, point: usize) -> Option<PointTruth> {
+        let index = match &self.index_by_position {
+            None => *scan.source_index.get(point)?,
+            Some(by_position) => *by_position.get(&position_key(&scan.points_m[point]))?,
+        };
+        self.points.get(index as usize).copied()
+    }
+}
+
+/// The exact bits of a position.
+pub fn position_key(p: &[f32; 3]) -> [u32; 3] {
+    [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()]
 }
 
 /// Truth of one point (see docs/ground-truth.md).
@@ -247,8 +275,8 @@ impl Accumulator {
             .add(error);
     }
 
-    fn add_pair(&mut self, scan: &Scan, result: &PairLooming, truth: &[PointTruth]) {
-        let truth_of = |point: usize| truth.get(scan.source_index[point] as usize).copied();
+    fn add_pair(&mut self, scan: &Scan, result: &PairLooming, truth: &ScanTruth) {
+        let truth_of = |point: usize| truth.of(scan, point);
         // Per point: L_ego against the true point looming.
         if result.availability.ego_velocity {
             for (point, &l_ego) in result.l_ego.iter().enumerate() {
@@ -358,9 +386,47 @@ impl Accumulator {
     }
 }
 
-/// Evaluate the engine on `path` with `config`.
+/// Evaluate the engine on `path` with `config`, against the log's own truth.
 pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalError> {
+    evaluate_against(path, config, None)
+}
+
+/// Evaluate the engine on `path` with `config`, against the truth of the log
+/// itself or, with `truth_path`, of another log whose LiDAR scans have the
+/// same stamps and points (the synthetic drive a KITTI folder was made from);
+/// its points are matched by their exact positions.
+pub fn evaluate_against(
+    path: &Path,
+    config: &EngineConfig,
+    truth_path: Option<&Path>,
+) -> Result<EvalReport, EvalError> {
     let input = InputFile::open(path, InputOptions::default())?;
+    let mut state = EvalState::new(config);
+    let outcome = match truth_path {
+        None => own_truth(path, &input, &mut state),
+        Some(truth_path) => external::with_truth_of(truth_path, |truths| {
+            replay_input(&input, &mut |_| {}, &mut |pair| {
+                if let Some(truth) = truths.truth_at(pair.current.stamp_ns) {
+                    state.evaluate_pair(&pair, &truth);
+                }
+            })
+            .map_err(replay_error)
+        }),
+    };
+    outcome?;
+    Ok(state.report(path))
+}
+
+fn replay_error(error: ReplayError) -> EvalError {
+    match error {
+        ReplayError::Input(e) => EvalError::Input(e),
+        ReplayError::Topic { path, source } => EvalError::Topic { path, source },
+    }
+}
+
+/// Truth from the log's own `/truth/points`: it arrives with its scan, before
+/// the pair that reports on it.
+fn own_truth(path: &Path, input: &InputFile, state: &mut EvalState) -> Result<(), EvalError> {
     let truth_channel = input
         .catalog()
         .channels
@@ -368,19 +434,19 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
         .find(|c| c.topic == TRUTH_POINTS_TOPIC)
         .map(|c| c.id)
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
-    // Truth arrives with its scan, before the pair that reports on it.
-    let truths = std::cell::RefCell::new(BTreeMap::<StampNs, Vec<PointTruth>>::new());
+    let truths = std::cell::RefCell::new(BTreeMap::<StampNs, ScanTruth>::new());
     let mut failure: Option<String> = None;
-    let mut accumulator = Accumulator::default();
-    let (mut pairs, mut with_ego) = (0u64, 0u64);
-    let mut cache = engine::EngineCache::default();
     replay_input(
-        &input,
+        input,
         &mut |message| {
             if message.channel_id == truth_channel {
                 match decode_truth(&message.data) {
                     Ok((stamp, points)) => {
-                        truths.borrow_mut().insert(stamp, points);
+                        let truth = ScanTruth {
+                            points,
+                            index_by_position: None,
+                        };
+                        truths.borrow_mut().insert(stamp, truth);
                     }
                     Err(e) => failure = Some(e),
                 }
@@ -388,59 +454,62 @@ pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalEr
         },
         &mut |pair| {
             let mut truths = truths.borrow_mut();
-            evaluate_pair(
-                &pair,
-                config,
-                &mut cache,
-                &mut truths,
-                &mut accumulator,
-                &mut pairs,
-                &mut with_ego,
-            );
+            // Truth of older scans is no longer needed: memory stays bounded.
+            let keep = truths.split_off(&pair.previous.stamp_ns);
+            *truths = keep;
+            if let Some(truth) = truths.get(&pair.current.stamp_ns) {
+                state.evaluate_pair(&pair, truth);
+            }
         },
     )
-    .map_err(|e| match e {
-        ReplayError::Input(e) => EvalError::Input(e),
-        ReplayError::Topic { path, source } => EvalError::Topic { path, source },
-    })?;
-    if let Some(reason) = failure {
-        return Err(EvalError::Truth(reason));
+    .map_err(replay_error)?;
+    match failure {
+        Some(reason) => Err(EvalError::Truth(reason)),
+        None => Ok(()),
     }
-    let (errors, moving_detection) = accumulator.finish();
-    Ok(EvalReport {
-        file: path.display().to_string(),
-        pairs,
-        pairs_with_ego_velocity: with_ego,
-        config: config.clone(),
-        errors,
-        moving_detection,
-        observable_motion_threshold_per_s: OBSERVABLE_MOTION_PER_S,
-    })
 }
 
-#[allow(clippy::too_many_arguments)]
-fn evaluate_pair(
-    pair: &ScanPair,
-    config: &EngineConfig,
-    cache: &mut engine::EngineCache,
-    truths: &mut BTreeMap<StampNs, Vec<PointTruth>>,
-    accumulator: &mut Accumulator,
-    pairs: &mut u64,
-    with_ego: &mut u64,
-) {
-    let stamp = pair.current.stamp_ns;
-    // Truth of older scans is no longer needed: memory stays bounded.
-    let keep = truths.split_off(&pair.previous.stamp_ns);
-    *truths = keep;
-    let Some(truth) = truths.get(&stamp) else {
-        return;
-    };
-    let Some(result) = engine::compute_with_cache(pair, config, cache) else {
-        return;
-    };
-    *pairs += 1;
-    *with_ego += u64::from(result.availability.ego_velocity);
-    accumulator.add_pair(&pair.current, &result, truth);
+/// The engine, its cache and the error accumulators of a run.
+struct EvalState<'c> {
+    config: &'c EngineConfig,
+    cache: engine::EngineCache,
+    accumulator: Accumulator,
+    pairs: u64,
+    with_ego: u64,
+}
+
+impl<'c> EvalState<'c> {
+    fn new(config: &'c EngineConfig) -> Self {
+        Self {
+            config,
+            cache: engine::EngineCache::default(),
+            accumulator: Accumulator::default(),
+            pairs: 0,
+            with_ego: 0,
+        }
+    }
+
+    fn evaluate_pair(&mut self, pair: &ScanPair, truth: &ScanTruth) {
+        let Some(result) = engine::compute_with_cache(pair, self.config, &mut self.cache) else {
+            return;
+        };
+        self.pairs += 1;
+        self.with_ego += u64::from(result.availability.ego_velocity);
+        self.accumulator.add_pair(&pair.current, &result, truth);
+    }
+
+    fn report(self, path: &Path) -> EvalReport {
+        let (errors, moving_detection) = self.accumulator.finish();
+        EvalReport {
+            file: path.display().to_string(),
+            pairs: self.pairs,
+            pairs_with_ego_velocity: self.with_ego,
+            config: self.config.clone(),
+            errors,
+            moving_detection,
+            observable_motion_threshold_per_s: OBSERVABLE_MOTION_PER_S,
+        }
+    }
 }
 
 impl EvalReport {
