@@ -193,6 +193,8 @@ pub struct EventDetector {
     tracks: Vec<Track>,
     next_id: u32,
     min_cells_used: Option<usize>,
+    /// Slot and stamp of the last pair seen.
+    last_slot: Option<(u64, i64)>,
 }
 
 impl EventDetector {
@@ -204,6 +206,7 @@ impl EventDetector {
             tracks: Vec::new(),
             next_id: 1,
             min_cells_used: None,
+            last_slot: None,
         }
     }
 
@@ -236,9 +239,10 @@ impl EventDetector {
         self.min_cells_used = Some(min_cells);
         let clusters = hot_clusters(looming, scan, &corridor, &self.config, min_cells);
         let margin = association_margin_cols(&looming.geometry);
-        let mut ended = self.close_stale(pair.index);
+        let slot = self.slot_of(stamp_ns, pair.dt_s);
+        let mut ended = self.close_stale(slot);
         let sample = Sample {
-            pair_index: pair.index,
+            pair_index: slot,
             stamp_ns,
             log_time_ns: pair.current_log_time_ns,
             period_ns: ((pair.dt_s * 1e9).round() as i64).max(1),
@@ -301,6 +305,22 @@ impl EventDetector {
             .collect();
         events.sort_by_key(|e| e.id);
         events
+    }
+
+    /// The pair's place in a sequence of scan periods: consecutive pairs count
+    /// one apart, pairs after a stretch without pairs (scans dropped beyond
+    /// the pairing gap) as many periods apart as their stamps are, so no track
+    /// bridges a hole in the log.
+    fn slot_of(&mut self, stamp_ns: i64, dt_s: f64) -> u64 {
+        let slot = match self.last_slot {
+            None => 0,
+            Some((slot, last_stamp_ns)) => {
+                let periods = (stamp_ns - last_stamp_ns) as f64 * 1e-9 / dt_s.max(1e-6);
+                slot + (periods.round() as u64).max(1)
+            }
+        };
+        self.last_slot = Some((slot, stamp_ns));
+        slot
     }
 
     /// Tracks not seen for longer than the gap allows end: confirmed ones as
@@ -486,5 +506,206 @@ fn peak_of(cluster: &Cluster, sample: &Sample) -> EventPeak {
         lateral_offset_m: cluster.lateral_offset_m,
         ego_speed_mps: sample.ego_speed_mps,
         cluster_cells: cluster.cells,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PERIOD_NS: i64 = 100_000_000;
+
+    /// A cluster at columns 100-109 of a 512-column image, rows 10-15.
+    fn cluster(looming_per_s: f64, near_range_m: f64) -> Cluster {
+        Cluster {
+            cells: 60,
+            rows: (10, 15),
+            cols: ColSpan {
+                start: 100,
+                len: 10,
+                cols: 512,
+            },
+            looming_per_s,
+            centroid_m: [near_range_m, 0.0, 0.0],
+            range_m: near_range_m + 0.2,
+            near_range_m,
+            lateral_offset_m: 0.0,
+            moving_cells: 40,
+        }
+    }
+
+    fn sample(pair_index: u64) -> Sample {
+        Sample {
+            pair_index,
+            stamp_ns: pair_index as i64 * PERIOD_NS,
+            log_time_ns: pair_index * PERIOD_NS as u64,
+            period_ns: PERIOD_NS,
+            ego_speed_mps: Some(10.0),
+        }
+    }
+
+    /// Run the detector over pairs 0.. with at most one cluster each
+    /// (`None`: nothing hot); returns every event.
+    fn detect(pairs: &[Option<Cluster>]) -> Vec<NearMissEvent> {
+        let mut detector = EventDetector::new(EventConfig::default());
+        let mut events = Vec::new();
+        for (index, cluster) in pairs.iter().enumerate() {
+            events.extend(detector.close_stale(index as u64));
+            if let Some(cluster) = cluster {
+                detector.take(cluster, &sample(index as u64), 4);
+            }
+        }
+        events.extend(detector.finish());
+        events
+    }
+
+    /// An object closing at 8 m/s from `start_m`: its looming and near range
+    /// at pair `k`.
+    fn approaching(start_m: f64, k: usize) -> Cluster {
+        let range = start_m - 0.8 * k as f64;
+        cluster(8.0 / range, range)
+    }
+
+    #[test]
+    fn one_hot_pair_is_no_event_two_are() {
+        assert!(detect(&[None, Some(approaching(10.0, 1)), None, None]).is_empty());
+        let events = detect(&[None, Some(approaching(10.0, 1)), Some(approaching(10.0, 2))]);
+        assert_eq!(events.len(), 1);
+        let event = &events[0];
+        assert_eq!(
+            (event.id, event.start_ns, event.hot_pairs),
+            (1, PERIOD_NS, 2)
+        );
+        assert_eq!(event.end_ns, 3 * PERIOD_NS);
+        // The peak is the later, closer pair.
+        assert!((event.peak_looming_per_s - 8.0 / 8.4).abs() < 1e-12);
+        assert!((event.min_time_to_contact_s - 8.4 / 8.0).abs() < 1e-12);
+        assert!(event.moving && (event.moving_fraction - 40.0 / 60.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn one_missed_pair_is_bridged_two_end_the_event() {
+        let bridged = detect(&[
+            Some(approaching(12.0, 0)),
+            Some(approaching(12.0, 1)),
+            None,
+            Some(approaching(12.0, 3)),
+        ]);
+        assert_eq!(bridged.len(), 1);
+        assert_eq!(bridged[0].hot_pairs, 3);
+        assert_eq!(bridged[0].scan_stamps_ns, vec![0, PERIOD_NS, 3 * PERIOD_NS]);
+        let split = detect(&[
+            Some(approaching(12.0, 0)),
+            Some(approaching(12.0, 1)),
+            None,
+            None,
+            Some(approaching(12.0, 4)),
+            Some(approaching(12.0, 5)),
+        ]);
+        assert_eq!(split.len(), 2);
+        assert_eq!((split[0].id, split[1].id), (1, 2));
+        assert_eq!(split[1].start_ns, 4 * PERIOD_NS);
+    }
+
+    #[test]
+    fn a_tentative_track_must_persist_without_a_gap() {
+        let events = detect(&[Some(approaching(12.0, 0)), None, Some(approaching(12.0, 2))]);
+        assert!(events.is_empty());
+    }
+
+    #[test]
+    fn looming_far_faster_than_the_range_closes_is_not_an_approach() {
+        // The near range stays at 3.3 m while the cluster reads 7 1/s: the
+        // corner of a near object, not something closing at 23 m/s.
+        let corner = |_: usize| cluster(7.0, 3.3);
+        let events = detect(&[
+            Some(approaching(4.2, 0)),
+            Some(approaching(4.2, 1)),
+            Some(corner(2)),
+            Some(corner(3)),
+        ]);
+        assert_eq!(events.len(), 1);
+        assert_eq!(events[0].hot_pairs, 2, "{:?}", events[0]);
+        assert!((events[0].peak_looming_per_s - 8.0 / 3.4).abs() < 1e-12);
+    }
+
+    #[test]
+    fn clusters_of_one_object_merge_into_the_oldest_track() {
+        let mut detector = EventDetector::new(EventConfig::default());
+        let left = |k: usize| Cluster {
+            cols: ColSpan {
+                start: 100,
+                len: 10,
+                cols: 512,
+            },
+            ..approaching(12.0, k)
+        };
+        let right = |k: usize| Cluster {
+            cols: ColSpan {
+                start: 130,
+                len: 10,
+                cols: 512,
+            },
+            ..approaching(12.0, k)
+        };
+        let whole = |k: usize| Cluster {
+            cols: ColSpan {
+                start: 100,
+                len: 40,
+                cols: 512,
+            },
+            ..approaching(12.0, k)
+        };
+        detector.take(&left(0), &sample(0), 4);
+        detector.take(&right(0), &sample(0), 4);
+        assert_eq!(detector.tracks.len(), 2);
+        detector.close_stale(1);
+        detector.take(&whole(1), &sample(1), 4);
+        assert_eq!(detector.tracks.len(), 1);
+        let events = detector.finish();
+        assert_eq!(events.len(), 1);
+        assert_eq!((events[0].start_ns, events[0].hot_pairs), (0, 2));
+    }
+
+    #[test]
+    fn the_default_smallest_cluster_follows_the_resolution() {
+        let geometry = |rows: usize, cols: usize| ImageGeometry {
+            rows,
+            cols,
+            beams: crate::engine::beams::BeamTable {
+                elevations_rad: (0..rows)
+                    .map(|r| (-24.9 + 26.8 * r as f64 / (rows - 1) as f64).to_radians())
+                    .collect(),
+            },
+            ring_to_row: None,
+        };
+        assert_eq!(default_min_cells(&geometry(64, 2048)), 40);
+        assert_eq!(default_min_cells(&geometry(32, 512)), 5);
+        assert_eq!(default_min_cells(&geometry(16, 256)), 3);
+    }
+
+    #[test]
+    fn pairs_after_a_hole_in_the_log_are_as_many_slots_apart_as_periods() {
+        let mut detector = EventDetector::new(EventConfig::default());
+        assert_eq!(detector.slot_of(0, 0.1), 0);
+        assert_eq!(detector.slot_of(PERIOD_NS, 0.1), 1);
+        // Jitter does not skip a slot; ten dropped scans skip ten.
+        assert_eq!(detector.slot_of(2 * PERIOD_NS + 20_000_000, 0.1), 2);
+        assert_eq!(detector.slot_of(13 * PERIOD_NS, 0.1), 13);
+    }
+
+    #[test]
+    fn events_rank_by_time_to_contact() {
+        let mut events = detect(&[
+            Some(approaching(12.0, 0)),
+            Some(approaching(12.0, 1)),
+            None,
+            None,
+            Some(approaching(6.0, 0)),
+            Some(approaching(6.0, 1)),
+        ]);
+        rank(&mut events);
+        assert_eq!(events[0].id, 2);
+        assert!(events[0].min_time_to_contact_s < events[1].min_time_to_contact_s);
     }
 }
