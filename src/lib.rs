@@ -24,3 +24,6 @@ pub mod ros;
 pub mod ros_schemas;
 pub mod synth;
 pub mod topics;
+
+#[cfg(test)]
+mod test_rng;

@@ -332,7 +332,7 @@ fn top_view(
             RenderChannel::Ego => colour::looming(looming.l_ego[index]),
             _ => looming
                 .image
-                .surface_cell(scan, index)
+                .surface_cell(index)
                 .map_or(colour::MASKED, |cell| cell_colour(looming, channel, cell)),
         };
         let (u, v) = projection.pixel_f(f64::from(p[0]), f64::from(p[1]));

@@ -39,16 +39,8 @@ fn synth(dir: &Path, scenario: &str, extra: &[&str]) -> PathBuf {
 }
 
 fn process(input: &Path, output: &Path, extra: &[&str]) {
-    let mut args = vec![
-        "process",
-        input.to_str().unwrap(),
-        "-o",
-        output.to_str().unwrap(),
-        "--force",
-        "-q",
-    ];
-    args.extend_from_slice(extra);
-    let out = looming(&args);
+    let args = [&["--force", "-q"], extra].concat();
+    let out = common::looming_process(input, output, &args);
     assert!(out.status.success(), "{}", stderr(&out));
 }
 
@@ -220,7 +212,7 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
         assert_eq!(cloud.len(), scan.points_m.len());
         for (i, p) in scan.points_m.iter().enumerate() {
             assert!(close_to_input(cloud.xyz(i), *p));
-            let cell = result.image.surface_cell(scan, i);
+            let cell = result.image.surface_cell(i);
             let trusted = cell.filter(|&c| result.mask[c] == 0);
             let fused = trusted.map_or(f32::NAN, |c| result.fused[c]);
             let written = cloud.f32(i, "looming");
@@ -482,12 +474,7 @@ fn a_processed_log_is_refused_unless_replace_which_writes_fresh_channels() {
     let input = synth(&dir, "cut-in", &["--start", "2.8", "--duration", "3.4"]);
     let first = dir.join("first.mcap");
     process(&input, &first, &[]);
-    let refused = looming(&[
-        "process",
-        first.to_str().unwrap(),
-        "-o",
-        dir.join("again.mcap").to_str().unwrap(),
-    ]);
+    let refused = common::looming_process(&first, &dir.join("again.mcap"), &[]);
     assert_eq!(refused.status.code(), Some(2));
     let message = stderr(&refused);
     assert!(

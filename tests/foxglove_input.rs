@@ -86,13 +86,7 @@ fn foxglove_point_clouds_are_paired_with_their_pose_as_lever_arm() {
     let in_path = dir.join("in.mcap");
     let out_path = dir.join("out.mcap");
     write(&in_path, &input);
-    let run = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out_path.to_str().unwrap(),
-        "-q",
-    ]);
+    let run = looming_process(&in_path, &out_path, &["-q"]);
     assert!(run.status.success(), "{}", stderr(&run));
     let output = read_all(&std::fs::read(&out_path).unwrap());
     assert_all_input_messages_copied(&read_all(&input), &output);

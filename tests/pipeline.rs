@@ -371,13 +371,11 @@ fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
     }
 
     // Strict mode refuses it.
-    let strict = looming(&[
-        "process",
-        dir.join("in.mcap").to_str().unwrap(),
-        "-o",
-        dir.join("strict.mcap").to_str().unwrap(),
-        "--strict",
-    ]);
+    let strict = looming_process(
+        &dir.join("in.mcap"),
+        &dir.join("strict.mcap"),
+        &["--strict"],
+    );
     assert_eq!(strict.status.code(), Some(3), "{}", stderr(&strict));
     assert!(!dir.join("strict.mcap").exists(), "no output on failure");
 }
@@ -435,13 +433,11 @@ fn bad_messages_are_skipped_counted_and_named() {
     let pairs = pair_records(&output);
     assert_eq!(pairs.len(), SCANS as usize - 2);
 
-    let strict = looming(&[
-        "process",
-        dir.join("in.mcap").to_str().unwrap(),
-        "-o",
-        dir.join("strict.mcap").to_str().unwrap(),
-        "--strict",
-    ]);
+    let strict = looming_process(
+        &dir.join("in.mcap"),
+        &dir.join("strict.mcap"),
+        &["--strict"],
+    );
     assert_eq!(strict.status.code(), Some(3));
     let message = stderr(&strict);
     assert!(
@@ -456,34 +452,16 @@ fn output_paths_are_guarded() {
     let input = default_drive();
     let in_path = dir.join("in.mcap");
     write(&in_path, &input);
-    let same = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        in_path.to_str().unwrap(),
-        "--force",
-    ]);
+    let same = looming_process(&in_path, &in_path, &["--force"]);
     assert_eq!(same.status.code(), Some(2), "{}", stderr(&same));
     assert_eq!(std::fs::read(&in_path).unwrap(), input, "input untouched");
     let out_path = dir.join("out.mcap");
     write(&out_path, b"precious");
-    let exists = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out_path.to_str().unwrap(),
-    ]);
+    let exists = looming_process(&in_path, &out_path, &[]);
     assert_eq!(exists.status.code(), Some(2));
     assert!(stderr(&exists).contains("--force"));
     assert_eq!(std::fs::read(&out_path).unwrap(), b"precious");
-    let forced = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out_path.to_str().unwrap(),
-        "--force",
-        "-q",
-    ]);
+    let forced = looming_process(&in_path, &out_path, &["--force", "-q"]);
     assert!(forced.status.success());
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -517,12 +495,7 @@ fn ambiguous_and_unknown_topics_list_the_candidates() {
     let in_path = dir.join("in.mcap");
     write(&in_path, &log.finish());
     let out = dir.join("out.mcap");
-    let ambiguous = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let ambiguous = looming_process(&in_path, &out, &[]);
     assert_eq!(ambiguous.status.code(), Some(2));
     let text = stderr(&ambiguous);
     assert!(
@@ -533,24 +506,10 @@ fn ambiguous_and_unknown_topics_list_the_candidates() {
         text.contains("--lidar-topic") && text.contains("sensor_msgs/msg/PointCloud2"),
         "{text}"
     );
-    let unknown = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--lidar-topic",
-        "/nope",
-    ]);
+    let unknown = looming_process(&in_path, &out, &["--lidar-topic", "/nope"]);
     assert_eq!(unknown.status.code(), Some(2));
     assert!(stderr(&unknown).contains("/sensing/lidar/rear"));
-    let chosen = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--lidar-topic",
-        "/sensing/lidar/rear",
-    ]);
+    let chosen = looming_process(&in_path, &out, &["--lidar-topic", "/sensing/lidar/rear"]);
     assert!(chosen.status.success(), "{}", stderr(&chosen));
 }
 
@@ -650,14 +609,7 @@ fn verify_checks_chunk_crcs() {
     assert_eq!(summary["input_report"]["bad_crc_chunks"], 1);
     assert!(summary["warnings"].to_string().contains("CRC"));
     let in_path = dir.join("in.mcap");
-    let strict = looming(&[
-        "process",
-        in_path.to_str().unwrap(),
-        "-o",
-        dir.join("s.mcap").to_str().unwrap(),
-        "--verify",
-        "--strict",
-    ]);
+    let strict = looming_process(&in_path, &dir.join("s.mcap"), &["--verify", "--strict"]);
     assert_eq!(strict.status.code(), Some(3), "{}", stderr(&strict));
 }
 
@@ -666,12 +618,7 @@ fn an_already_processed_log_is_refused() {
     let dir = scratch("reprocess");
     let input = default_drive();
     process(&dir, &input, &[]);
-    let again = looming(&[
-        "process",
-        dir.join("out.mcap").to_str().unwrap(),
-        "-o",
-        dir.join("again.mcap").to_str().unwrap(),
-    ]);
+    let again = looming_process(&dir.join("out.mcap"), &dir.join("again.mcap"), &[]);
     assert_eq!(again.status.code(), Some(2));
     assert!(
         stderr(&again).contains("/looming/pairs"),

@@ -268,14 +268,7 @@ fn every_scenario_inspects_and_processes_and_its_motion_matches_the_truth() {
             "{name}"
         );
         let out = dir.join(format!("{name}-processed.mcap"));
-        let run = looming(&[
-            "process",
-            path.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--force",
-            "-q",
-        ]);
+        let run = looming_process(&path, &out, &["--force", "-q"]);
         assert!(run.status.success(), "{name}: {}", stderr(&run));
         let contents = read_all(&std::fs::read(&out).unwrap());
         let truth: Vec<serde_json::Value> = contents

@@ -141,10 +141,10 @@ fn cloud(scan: &Scan, layout: Layout, data: Vec<u8>) -> PointCloud {
 
 /// Per point of the current scan: its surface cell when that cell's values
 /// are trusted (unmasked), else `None`.
-fn trusted_cell(scan: &Scan, looming: &PairLooming, index: usize) -> Option<usize> {
+fn trusted_cell(looming: &PairLooming, index: usize) -> Option<usize> {
     looming
         .image
-        .surface_cell(scan, index)
+        .surface_cell(index)
         .filter(|&cell| looming.mask[cell] == 0)
 }
 
@@ -178,11 +178,11 @@ pub fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> Po
     }
     let mut out = Packer::with_points(layout.stride, scan.points_m.len());
     for (index, p) in scan.points_m.iter().enumerate() {
-        let trusted = trusted_cell(scan, looming, index);
-        let fused = trusted.map_or(f32::NAN, |cell| quantized(looming.fused[cell]));
+        let cell = looming.image.surface_cell(index);
+        let trusted = cell.filter(|&c| looming.mask[c] == 0);
+        let fused = trusted.map_or(f32::NAN, |c| quantized(looming.fused[c]));
         out.xyz(p).f32(fused).rgba(colour::looming(fused));
         if fields == FieldSet::Full {
-            let cell = looming.image.surface_cell(scan, index);
             let at = |values: &[f32]| cell.map_or(f32::NAN, |c| quantized(values[c]));
             out.f32(at(&looming.l_lidar))
                 .f32(quantized(looming.l_ego[index]))
@@ -203,7 +203,7 @@ pub fn disagreement_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
         .rgba();
     let mut out = Packer::with_points(layout.stride, 0);
     for (index, p) in scan.points_m.iter().enumerate() {
-        let Some(cell) = trusted_cell(scan, looming, index) else {
+        let Some(cell) = trusted_cell(looming, index) else {
             continue;
         };
         if looming.moving[cell] {
@@ -229,7 +229,7 @@ pub fn threat_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
         }
         let fused = looming
             .image
-            .surface_cell(scan, index)
+            .surface_cell(index)
             .map_or(f32::NAN, |cell| quantized(looming.fused[cell]));
         out.xyz(p)
             .f32(fused)

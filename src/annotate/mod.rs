@@ -35,7 +35,8 @@ pub struct AnnotateConfig {
     pub fields: FieldSet,
 }
 
-/// One of our channels, in the order they are registered.
+/// One of our channels, in the order they are registered (the discriminant
+/// is the channel's slot).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Channel {
     Points,
@@ -257,10 +258,7 @@ impl Annotator {
         data: Vec<u8>,
         out: &mut Vec<OwnMessage>,
     ) {
-        let slot = CHANNELS
-            .iter()
-            .position(|c| *c == channel)
-            .expect("every channel is listed");
+        let slot = channel as usize;
         out.push(OwnMessage {
             channel_id: self.channel_ids[slot],
             sequence: self.sequences[slot],
@@ -276,4 +274,19 @@ fn point_count(cloud: &::foxglove::messages::PointCloud) -> u64 {
         return 0;
     }
     (cloud.data.len() / cloud.point_stride as usize) as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_channel_is_its_own_slot() {
+        for (slot, channel) in CHANNELS.iter().enumerate() {
+            assert_eq!(*channel as usize, slot);
+        }
+        let topics: Vec<String> = channel_specs().into_iter().map(|s| s.topic).collect();
+        assert_eq!(topics[0], POINTS_TOPIC);
+        assert_eq!(topics[7], LOG_TOPIC);
+    }
 }

@@ -349,21 +349,7 @@ mod tests {
 
     const DEG: f64 = std::f64::consts::PI / 180.0;
 
-    /// SplitMix64: deterministic, no dependencies.
-    struct Rng(u64);
-    impl Rng {
-        fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        /// Uniform in [-1, 1).
-        fn signed(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
+    use crate::test_rng::SplitMix64;
 
     /// Points of each beam (degrees table), `counts[k]` of them, jittered
     /// uniformly by +-`jitter_deg`, shuffled; with each point's true beam.
@@ -373,7 +359,7 @@ mod tests {
         jitter_deg: f64,
         seed: u64,
     ) -> (Vec<f32>, Vec<usize>) {
-        let mut rng = Rng(seed);
+        let mut rng = SplitMix64(seed);
         let mut points: Vec<(f32, usize)> = Vec::new();
         for (k, (&e, &n)) in table_deg.iter().zip(counts).enumerate() {
             for _ in 0..n {
@@ -389,7 +375,7 @@ mod tests {
 
     /// Very unequal counts: the upper beams see the sky and return little.
     fn unequal_counts(beams: usize, seed: u64) -> Vec<usize> {
-        let mut rng = Rng(seed);
+        let mut rng = SplitMix64(seed);
         (0..beams)
             .map(|k| {
                 let up = k as f64 / (beams - 1) as f64; // 0 lowest, 1 highest
@@ -503,7 +489,7 @@ mod tests {
         let t = uniform_deg(32, -30.67, 10.67);
         let (mut elevations, _) = synth(&t, &[1500; 32], 0.02, 61);
         // A few hundred returns scattered far above and between the beams.
-        let mut rng = Rng(62);
+        let mut rng = SplitMix64(62);
         elevations.extend((0..300).map(|_| ((12.0 + 3.0 * rng.signed()) * DEG) as f32));
         elevations.extend((0..300).map(|_| ((-10.0 + 20.0 * rng.signed()) * DEG) as f32));
         let table = BeamTable::infer(&elevations, 128).unwrap();

@@ -86,22 +86,18 @@ pub struct RangeImage {
     pub point: Vec<u32>,
     /// Cell of every point of the scan (`NO_POINT` if outside the image).
     pub point_cell: Vec<u32>,
+    /// Per point, its cell when the point is the surface that cell measured:
+    /// within 5 % of the cell's nearest range. A return hidden behind that
+    /// surface (a second echo, a point seen through a gap) takes none of the
+    /// cell's values (`NO_POINT`).
+    pub point_surface: Vec<u32>,
 }
 
 impl RangeImage {
-    /// The cell whose surface point `index` is: its cell, when the point lies
-    /// within 5 % of the cell's nearest range. A return hidden behind that
-    /// surface (a second echo, a point seen through a gap) takes none of the
-    /// cell's values.
-    pub fn surface_cell(&self, scan: &Scan, index: usize) -> Option<usize> {
-        let cell = *self.point_cell.get(index)?;
-        if cell == NO_POINT {
-            return None;
-        }
-        let cell = cell as usize;
-        let p = scan.points_m[index];
-        let range_m = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        (range_m <= self.range_m[cell] * 1.05).then_some(cell)
+    /// The cell whose surface point `index` is (see `point_surface`).
+    pub fn surface_cell(&self, index: usize) -> Option<usize> {
+        let cell = *self.point_surface.get(index)?;
+        (cell != NO_POINT).then_some(cell as usize)
     }
 
     pub fn build(scan: &Scan, geometry: &ImageGeometry) -> Self {
@@ -121,10 +117,27 @@ impl RangeImage {
                 point[cell] = index as u32;
             }
         }
+        let point_surface = scan
+            .points_m
+            .iter()
+            .zip(&point_cell)
+            .map(|(p, &cell)| {
+                if cell == NO_POINT {
+                    return NO_POINT;
+                }
+                let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                if r <= range_m[cell as usize] * 1.05 {
+                    cell
+                } else {
+                    NO_POINT
+                }
+            })
+            .collect();
         Self {
             range_m,
             point,
             point_cell,
+            point_surface,
         }
     }
 }

@@ -287,7 +287,7 @@ fn compute_from_surfaces(
     );
     let velocity = pair.motion.velocity_at(current.stamp_ns);
     let l_ego = ego_looming(current, pair);
-    let point_threat = point_threats(current, cur_image, &cells.threat);
+    let point_threat = point_threats(cur_image, &cells.threat);
     Some(PairLooming {
         availability: Availability {
             ego_velocity: full.is_some(),
@@ -713,12 +713,16 @@ fn ego_looming(scan: &Scan, pair: &ScanPair) -> Vec<f32> {
 
 /// A point takes its cell's threat level when it is the surface the cell
 /// measured; hidden returns behind it do not.
-fn point_threats(scan: &Scan, image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel> {
-    (0..scan.points_m.len())
-        .map(|index| {
-            image
-                .surface_cell(scan, index)
-                .map_or(ThreatLevel::None, |cell| threat[cell])
+fn point_threats(image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel> {
+    image
+        .point_surface
+        .iter()
+        .map(|&cell| {
+            if cell == NO_POINT {
+                ThreatLevel::None
+            } else {
+                threat[cell as usize]
+            }
         })
         .collect()
 }

@@ -9,10 +9,8 @@ use nalgebra::Vector3;
 /// Below this speed the direction of travel is unknown: the LiDAR's x axis
 /// stands for it.
 const MIN_SPEED_FOR_HEADING_MPS: f64 = 0.5;
-/// Path length sampled either side of the sensor, metres.
+/// Path length either side of the sensor, metres.
 const REACH_M: f64 = 120.0;
-/// Spacing of the path samples, metres.
-const STEP_M: f64 = 0.5;
 
 /// How the corridor's path was found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -24,11 +22,13 @@ pub enum PathSource {
     LidarXAxis,
 }
 
-/// The ego path in the LiDAR frame (horizontal plane) and the band around it.
+/// The ego path in the LiDAR frame (horizontal plane) and the band around it:
+/// the arc through the sensor tangent to `heading_rad` with constant
+/// `curvature_per_m` (left positive), `REACH_M` long either way.
 #[derive(Debug, Clone)]
 pub struct Corridor {
-    /// Path samples (x, y), metres, ordered along the path.
-    path_xy: Vec<[f64; 2]>,
+    heading_rad: f64,
+    curvature_per_m: f64,
     half_width_m: f64,
     pub source: PathSource,
 }
@@ -49,53 +49,45 @@ impl Corridor {
             }
             _ => (0.0, 0.0, PathSource::LidarXAxis),
         };
-        let steps = (REACH_M / STEP_M) as i64;
-        let path_xy = (-steps..=steps)
-            .map(|k| arc_point(heading_rad, curvature_per_m, k as f64 * STEP_M))
-            .collect();
         Self {
-            path_xy,
+            heading_rad,
+            curvature_per_m,
             half_width_m,
             source,
         }
     }
 
-    /// Horizontal distance of a point from the path, metres.
+    /// Horizontal distance of a point from the path, metres, in closed form:
+    /// from the line, or from the circle when the point's foot lies on the
+    /// arc; else from the nearer end.
     pub fn offset_m(&self, p: &Vector3<f64>) -> f64 {
-        self.path_xy
-            .windows(2)
-            .map(|w| segment_distance([p.x, p.y], w[0], w[1]))
+        // Path-aligned coordinates: `along` the heading, `left` of it.
+        let (sin, cos) = self.heading_rad.sin_cos();
+        let along = p.x * cos + p.y * sin;
+        let left = -p.x * sin + p.y * cos;
+        let k = self.curvature_per_m;
+        if k.abs() < 1e-9 {
+            return (along - along.clamp(-REACH_M, REACH_M)).hypot(left);
+        }
+        // The circle's centre is at (0, 1/k); the path point at arc length s
+        // is (sin(ks)/k, (1 - cos(ks))/k).
+        let (du, dv) = (along, left - 1.0 / k);
+        let arc_m = (du * k).atan2(-dv * k) / k;
+        if arc_m.abs() <= REACH_M {
+            return (du.hypot(dv) - 1.0 / k.abs()).abs();
+        }
+        [-REACH_M, REACH_M]
+            .iter()
+            .map(|&s| {
+                let end = [(k * s).sin() / k, (1.0 - (k * s).cos()) / k];
+                (along - end[0]).hypot(left - end[1])
+            })
             .fold(f64::INFINITY, f64::min)
     }
 
     pub fn contains(&self, p: &Vector3<f64>) -> bool {
         self.offset_m(p) <= self.half_width_m
     }
-}
-
-/// The point at arc length `s` of the path leaving the origin with `heading`
-/// and constant `curvature` (left positive).
-fn arc_point(heading_rad: f64, curvature_per_m: f64, s_m: f64) -> [f64; 2] {
-    if curvature_per_m.abs() < 1e-9 {
-        return [s_m * heading_rad.cos(), s_m * heading_rad.sin()];
-    }
-    let turned = heading_rad + curvature_per_m * s_m;
-    [
-        (turned.sin() - heading_rad.sin()) / curvature_per_m,
-        (heading_rad.cos() - turned.cos()) / curvature_per_m,
-    ]
-}
-
-fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (abx, aby) = (b[0] - a[0], b[1] - a[1]);
-    let (apx, apy) = (p[0] - a[0], p[1] - a[1]);
-    let len2 = abx * abx + aby * aby;
-    let t = if len2 > 0.0 {
-        ((apx * abx + apy * aby) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (apx - t * abx).hypot(apy - t * aby)
 }
 
 #[cfg(test)]
@@ -129,6 +121,22 @@ mod tests {
         }
         // Straight ahead 40 m is far off a 28.65 m circle.
         assert!(!corridor.contains(&Vector3::new(40.0, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn beyond_its_reach_the_path_ends() {
+        // 10 m/s at 0.01 rad/s: a 1 km radius, so 120 m of arc is a small part.
+        let corridor = Corridor::new(
+            Some(Vector3::new(10.0, 0.0, 0.0)),
+            Some(Vector3::new(0.0, 0.0, 0.01)),
+            2.0,
+        );
+        let (k, s) = (0.001_f64, REACH_M);
+        let end = Vector3::new((k * s).sin() / k, (1.0 - (k * s).cos()) / k, 0.0);
+        let beyond = end + Vector3::new((k * s).cos(), (k * s).sin(), 0.0) * 30.0;
+        assert!((corridor.offset_m(&beyond) - 30.0).abs() < 0.05);
+        let straight = Corridor::new(Some(Vector3::new(10.0, 0.0, 0.0)), None, 2.0);
+        assert!((straight.offset_m(&Vector3::new(150.0, 0.0, 0.0)) - 30.0).abs() < 1e-9);
     }
 
     #[test]

@@ -632,30 +632,18 @@ mod tests {
     #[test]
     fn clusters_of_one_object_merge_into_the_oldest_track() {
         let mut detector = EventDetector::new(EventConfig::default());
-        let left = |k: usize| Cluster {
+        // The object approaching over columns `start..start + len`.
+        let at = |start: usize, len: usize, k: usize| Cluster {
             cols: ColSpan {
-                start: 100,
-                len: 10,
+                start,
+                len,
                 cols: 512,
             },
             ..approaching(12.0, k)
         };
-        let right = |k: usize| Cluster {
-            cols: ColSpan {
-                start: 130,
-                len: 10,
-                cols: 512,
-            },
-            ..approaching(12.0, k)
-        };
-        let whole = |k: usize| Cluster {
-            cols: ColSpan {
-                start: 100,
-                len: 40,
-                cols: 512,
-            },
-            ..approaching(12.0, k)
-        };
+        let left = |k| at(100, 10, k);
+        let right = |k| at(130, 10, k);
+        let whole = |k| at(100, 40, k);
         detector.take(&left(0), &sample(0), 4);
         detector.take(&right(0), &sample(0), 4);
         assert_eq!(detector.tracks.len(), 2);

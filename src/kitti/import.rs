@@ -273,20 +273,35 @@ fn sweep_times(dir: &Path, summary: &mut ImportSummary) -> Result<Vec<Sweep>, Ki
         None
     };
     let half_period_ns = (median_period_s(&mid) * 0.5e9).round() as i64;
-    Ok((0..mid.len())
+    let mut reversed: Vec<usize> = Vec::new();
+    let sweeps = (0..mid.len())
         .map(|index| match &bounds {
             Some((start, end)) if end[index] > start[index] => Sweep {
                 index,
                 start_ns: start[index],
                 end_ns: end[index],
             },
-            _ => Sweep {
-                index,
-                start_ns: mid[index] - half_period_ns,
-                end_ns: mid[index] + half_period_ns,
-            },
+            bounds => {
+                if bounds.is_some() {
+                    reversed.push(index);
+                }
+                Sweep {
+                    index,
+                    start_ns: mid[index] - half_period_ns,
+                    end_ns: mid[index] + half_period_ns,
+                }
+            }
         })
-        .collect())
+        .collect();
+    if let Some(first) = reversed.first() {
+        summary.warnings.push(format!(
+            "{}: {} frames (the first: line {}) end no later than they start; timed around timestamps.txt instead",
+            end_path.display(),
+            reversed.len(),
+            first + 1
+        ));
+    }
+    Ok(sweeps)
 }
 
 /// Median difference of consecutive stamps, seconds (0.1 s when unknown).

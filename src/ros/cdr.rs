@@ -129,6 +129,17 @@ fn take_array<const N: usize>(
         .ok_or_else(|| truncated(pos, what, N, have))
 }
 
+/// The next `n` bytes of `buf` from `pos`, or a truncation error.
+fn take_slice<'a>(
+    buf: &'a [u8],
+    pos: usize,
+    n: usize,
+    what: &'static str,
+) -> Result<&'a [u8], DecodeError> {
+    buf.get(pos..pos.saturating_add(n))
+        .ok_or_else(|| truncated(pos, what, n, buf.len().saturating_sub(pos)))
+}
+
 /// Reader for ROS 2 plain CDR (XCDR1), either endianness.
 #[derive(Debug, Clone)]
 pub struct CdrReader<'a> {
@@ -177,6 +188,22 @@ impl<'a> CdrReader<'a> {
         self.pos += N;
         Ok(bytes)
     }
+
+    /// An aligned number in the payload's byte order.
+    #[inline]
+    fn number<const N: usize, T>(
+        &mut self,
+        what: &'static str,
+        from_be: fn([u8; N]) -> T,
+        from_le: fn([u8; N]) -> T,
+    ) -> Result<T, DecodeError> {
+        let bytes = self.primitive::<N>(what)?;
+        Ok(if self.big_endian {
+            from_be(bytes)
+        } else {
+            from_le(bytes)
+        })
+    }
 }
 
 impl<'a> WireRead<'a> for CdrReader<'a> {
@@ -195,30 +222,15 @@ impl<'a> WireRead<'a> for CdrReader<'a> {
     }
 
     fn read_u32(&mut self) -> Result<u32, DecodeError> {
-        let b = self.primitive::<4>("uint32")?;
-        Ok(if self.big_endian {
-            u32::from_be_bytes(b)
-        } else {
-            u32::from_le_bytes(b)
-        })
+        self.number("uint32", u32::from_be_bytes, u32::from_le_bytes)
     }
 
     fn read_i32(&mut self) -> Result<i32, DecodeError> {
-        let b = self.primitive::<4>("int32")?;
-        Ok(if self.big_endian {
-            i32::from_be_bytes(b)
-        } else {
-            i32::from_le_bytes(b)
-        })
+        self.number("int32", i32::from_be_bytes, i32::from_le_bytes)
     }
 
     fn read_f64(&mut self) -> Result<f64, DecodeError> {
-        let b = self.primitive::<8>("float64")?;
-        Ok(if self.big_endian {
-            f64::from_be_bytes(b)
-        } else {
-            f64::from_le_bytes(b)
-        })
+        self.number("float64", f64::from_be_bytes, f64::from_le_bytes)
     }
 
     fn read_str(&mut self) -> Result<&'a str, DecodeError> {
@@ -236,11 +248,7 @@ impl<'a> WireRead<'a> for CdrReader<'a> {
     }
 
     fn read_bytes(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], DecodeError> {
-        let have = self.remaining();
-        if n > have {
-            return Err(truncated(self.pos, what, n, have));
-        }
-        let bytes = &self.buf[self.pos..self.pos + n];
+        let bytes = take_slice(self.buf, self.pos, n, what)?;
         self.pos += n;
         Ok(bytes)
     }
@@ -304,11 +312,7 @@ impl<'a> WireRead<'a> for Ros1Reader<'a> {
     }
 
     fn read_bytes(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], DecodeError> {
-        let have = self.remaining();
-        if n > have {
-            return Err(truncated(self.pos, what, n, have));
-        }
-        let bytes = &self.buf[self.pos..self.pos + n];
+        let bytes = take_slice(self.buf, self.pos, n, what)?;
         self.pos += n;
         Ok(bytes)
     }

@@ -647,22 +647,7 @@ mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
-    /// SplitMix64: deterministic pseudo-random numbers without extra crates.
-    struct Rng(u64);
-    impl Rng {
-        fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        /// Uniform in [lo, hi).
-        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-            let unit = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-            lo + (hi - lo) * unit
-        }
-    }
+    use crate::test_rng::SplitMix64;
 
     /// Unit direction from azimuth (about +z from +x) and elevation (from the
     /// xy plane, positive up).
@@ -1040,7 +1025,7 @@ mod tests {
             radius_m: 1.0,
             height_m: 2.0,
         };
-        let mut rng = Rng(7);
+        let mut rng = SplitMix64(7);
         for _ in 0..1000 {
             let d = Vector3::new(
                 rng.uniform(-1.0, 1.0),
@@ -1251,7 +1236,7 @@ mod tests {
         assert_close(hit.range_m, 1.25_f64.sqrt() * 2.0, 1e-12);
     }
 
-    fn random_shape(rng: &mut Rng) -> Shape {
+    fn random_shape(rng: &mut SplitMix64) -> Shape {
         if rng.next_u64().is_multiple_of(2) {
             Shape::Box {
                 center: Point3::new(
@@ -1284,7 +1269,7 @@ mod tests {
     /// whole ray for a miss) is deep inside the shape.
     #[test]
     fn property_hits_lie_on_the_surface_and_nothing_is_skipped() {
-        let mut rng = Rng(0x5EED);
+        let mut rng = SplitMix64(0x5EED);
         let (mut hits, mut misses) = (0, 0);
         for _ in 0..4000 {
             let shape = random_shape(&mut rng);
@@ -1359,7 +1344,7 @@ mod tests {
     /// `Shape::intersect`, including the tie rule and the sphere early-out.
     #[test]
     fn property_cast_matches_brute_force() {
-        let mut rng = Rng(42);
+        let mut rng = SplitMix64(42);
         let mut objects: Vec<SceneObject> = (0..60)
             .map(|i| object(random_shape(&mut rng), i % 3))
             .collect();
@@ -1401,7 +1386,7 @@ mod tests {
 
     /// A road scene: 1 ground + 40 boxes + 10 cylinders around a sensor.
     fn benchmark_scene() -> SceneSnapshot {
-        let mut rng = Rng(2024);
+        let mut rng = SplitMix64(2024);
         let mut objects = vec![object(Shape::Ground { height_m: 0.0 }, 0)];
         for i in 0..40 {
             let along = rng.uniform(-80.0, 80.0);

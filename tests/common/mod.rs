@@ -188,6 +188,18 @@ pub fn looming(args: &[&str]) -> Output {
         .expect("the looming binary runs")
 }
 
+/// Run `looming process INPUT -o OUTPUT EXTRA...`.
+pub fn looming_process(input: &Path, output: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "process",
+        input.to_str().expect("UTF-8 path"),
+        "-o",
+        output.to_str().expect("UTF-8 path"),
+    ];
+    args.extend_from_slice(extra);
+    looming(&args)
+}
+
 pub fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
