@@ -129,6 +129,12 @@ pub struct PairLooming {
     pub threat: Vec<ThreatLevel>,
     /// Per cell: `|n . e|` of the current surface (1 where no plane was fitted).
     pub incidence_cos: Vec<f32>,
+    /// Per cell: unit normal of the current surface, facing the sensor (zero
+    /// where no plane was fitted).
+    pub normal: Vec<[f32; 3]>,
+    /// Per row (beam, lowest first): the range noise (1 sigma, metres) used
+    /// for that beam's cells.
+    pub range_noise_m_per_row: Vec<f32>,
     /// Time between the compared returns, s.
     pub dt_s: Vec<f32>,
     /// Per point: `L_ego`, 1/s (NaN without velocity).
@@ -288,6 +294,7 @@ fn compute_from_surfaces(
     let velocity = pair.motion.velocity_at(current.stamp_ns);
     let l_ego = ego_looming(current, pair);
     let point_threat = point_threats(cur_image, &cells.threat);
+    let range_noise_m_per_row = vec![config.range_noise_m as f32; geometry.rows];
     Some(PairLooming {
         availability: Availability {
             ego_velocity: full.is_some(),
@@ -308,6 +315,8 @@ fn compute_from_surfaces(
         fused: cells.fused,
         threat: cells.threat,
         incidence_cos: cur_surfaces.incidence_cos.clone(),
+        normal: cur_surfaces.normal.clone(),
+        range_noise_m_per_row,
         dt_s: cells.dt_s,
         l_ego,
         point_threat,
