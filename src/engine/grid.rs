@@ -23,6 +23,11 @@ pub struct ImageGeometry {
     /// (rings sorted by elevation, so any numbering works); else rows come
     /// from elevation.
     pub ring_to_row: Option<Vec<usize>>,
+    /// Per row, `c` of the beam's measured elevation `beam + c / range`
+    /// (rad m), when rows come from rings: a laser mounted off the rotation
+    /// axis (HDL-64E: ~0.2 m) is seen from the frame origin higher at short
+    /// range, by more than the beam spacing within 10 m. `None`: on the axis.
+    pub parallax_rad_m: Option<Vec<f64>>,
 }
 
 impl ImageGeometry {
@@ -38,9 +43,43 @@ impl ImageGeometry {
         (self.col_f(azimuth_rad) + 0.5) as usize % self.cols
     }
 
-    /// Continuous row of an elevation.
+    /// Continuous row of an elevation (lasers on the rotation axis).
     pub fn row_f(&self, elevation_rad: f64) -> f64 {
         self.beams.row_f(elevation_rad)
+    }
+
+    /// Continuous row of a direction seen at `range_m`: between the beams'
+    /// elevations at that range, so that a laser off the rotation axis keeps
+    /// its own row near the sensor (each return's coordinate then lies
+    /// within its cell, which the renderer relies on).
+    pub fn row_f_at(&self, elevation_rad: f64, range_m: f64) -> f64 {
+        let Some(parallax) = &self.parallax_rad_m else {
+            return self.row_f(elevation_rad);
+        };
+        let beams = &self.beams.elevations_rad;
+        let n = beams.len().min(parallax.len());
+        if n < 2 || range_m.is_nan() || range_m <= 0.0 {
+            return self.row_f(elevation_rad);
+        }
+        let at = |k: usize| beams[k] + parallax[k] / range_m;
+        // Rows are in elevation order at any range the model holds; a
+        // binary search over the beams evaluated at this range.
+        let (mut lo, mut hi) = (0usize, n);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if at(mid) <= elevation_rad {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        let k = lo.clamp(1, n - 1) - 1;
+        let span = at(k + 1) - at(k);
+        if span > 0.0 {
+            k as f64 + (elevation_rad - at(k)) / span
+        } else {
+            k as f64
+        }
     }
 
     pub fn cells(&self) -> usize {
@@ -168,7 +207,7 @@ pub fn geometry_for(
         if rows == 0 {
             return None;
         }
-        let (beams, ring_to_row) = ring_elevations(current, rows)?;
+        let (beams, ring_to_row, parallax_rad_m) = ring_elevations(current, rows)?;
         let cols = columns
             .unwrap_or_else(|| most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows));
         return (cols >= 8).then_some(ImageGeometry {
@@ -176,6 +215,7 @@ pub fn geometry_for(
             cols,
             beams,
             ring_to_row: Some(ring_to_row),
+            parallax_rad_m,
         });
     }
     let elevations: Vec<f32> = current
@@ -193,6 +233,7 @@ pub fn geometry_for(
         cols,
         beams,
         ring_to_row: None,
+        parallax_rad_m: None,
     })
 }
 
@@ -206,37 +247,56 @@ fn most_points_per_row(rows_of_points: impl Iterator<Item = usize>, rows: usize)
     counts.into_iter().max().unwrap_or(0)
 }
 
-/// Median elevation of each ring (rings with no points interpolated by ring
-/// number), and the row of each ring once sorted by elevation.
-fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>)> {
+/// Each ring's elevation model `beam + c / range` (rings with no points
+/// interpolated by ring number), and the row of each ring once sorted by
+/// elevation.
+fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>, Option<Vec<f64>>)> {
     let rings = scan.ring.as_ref()?;
-    let mut per_ring: Vec<Vec<f32>> = vec![Vec::new(); rows];
+    let mut per_ring: Vec<Vec<(f32, f32)>> = vec![Vec::new(); rows];
     for (p, &ring) in scan.points_m.iter().zip(rings) {
-        per_ring[usize::from(ring)].push(angles(p).1 as f32);
+        let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        per_ring[usize::from(ring)].push((1.0 / range, angles(p).1 as f32));
     }
-    let mut known: Vec<(usize, f64)> = Vec::new();
+    let mut known: Vec<(usize, ElevationModel)> = Vec::new();
     for (row, values) in per_ring.iter_mut().enumerate() {
-        if values.is_empty() {
-            continue;
+        if let Some(model) = ElevationModel::fit(values) {
+            known.push((row, model));
         }
-        values.sort_by(f32::total_cmp);
-        known.push((row, f64::from(values[values.len() / 2])));
     }
     if known.len() < 2 {
         return None;
     }
-    // Fill rings without returns (sky) by linear inter/extrapolation.
-    let elevations: Vec<f64> = (0..rows)
-        .map(|row| {
-            let upper = known
-                .iter()
-                .position(|(r, _)| *r >= row)
-                .unwrap_or(known.len() - 1)
-                .max(1);
-            let (r0, e0) = known[upper - 1];
-            let (r1, e1) = known[upper];
-            e0 + (e1 - e0) * (row as f64 - r0 as f64) / (r1 as f64 - r0 as f64)
+    // A laser whose ranges did not spread enough to measure its offset takes
+    // its neighbours' (the lasers of one block share a mounting height).
+    let measured: Vec<(usize, f64)> = known
+        .iter()
+        .filter_map(|(row, m)| m.parallax_rad_m.map(|c| (*row, c)))
+        .collect();
+    let with_parallax = measured.iter().any(|(_, c)| c.abs() >= MIN_PARALLAX_RAD_M);
+    let parallax: Vec<f64> = (0..rows)
+        .map(|row| nearest_measured(&measured, row))
+        .collect();
+    let known: Vec<(usize, ElevationModel)> = known
+        .into_iter()
+        .map(|(row, m)| {
+            let c = m.parallax_rad_m.unwrap_or(parallax[row]);
+            (row, ElevationModel::with_parallax(&m, c))
         })
+        .collect();
+    // Fill rings without returns (sky) by linear inter/extrapolation.
+    let interpolate = |row: usize, of: &dyn Fn(&ElevationModel) -> f64| {
+        let upper = known
+            .iter()
+            .position(|(r, _)| *r >= row)
+            .unwrap_or(known.len() - 1)
+            .max(1);
+        let (r0, m0) = &known[upper - 1];
+        let (r1, m1) = &known[upper];
+        let (e0, e1) = (of(m0), of(m1));
+        e0 + (e1 - e0) * (row as f64 - *r0 as f64) / (*r1 as f64 - *r0 as f64)
+    };
+    let elevations: Vec<f64> = (0..rows)
+        .map(|row| interpolate(row, &|m| m.elevation_at(ORDER_RANGE_M)))
         .collect();
     let mut order: Vec<usize> = (0..rows).collect();
     order.sort_by(|a, b| elevations[*a].total_cmp(&elevations[*b]).then(a.cmp(b)));
@@ -244,17 +304,152 @@ fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>)> 
     for (row, &ring) in order.iter().enumerate() {
         ring_to_row[ring] = row;
     }
-    let mut sorted: Vec<f64> = order.iter().map(|&ring| elevations[ring]).collect();
+    // The beam table holds each beam's elevation far away; rows are ordered
+    // at a typical range.
+    let mut sorted: Vec<f64> = order
+        .iter()
+        .map(|&ring| elevations[ring] - parallax[ring] / ORDER_RANGE_M)
+        .collect();
     // Equal elevations would make row_f flat: nudge them apart.
     for k in 1..sorted.len() {
         if sorted[k] <= sorted[k - 1] {
             sorted[k] = sorted[k - 1] + 1e-6;
         }
     }
+    let parallax = with_parallax.then(|| order.iter().map(|&ring| parallax[ring]).collect());
     Some((
         BeamTable {
             elevations_rad: sorted,
         },
         ring_to_row,
+        parallax,
     ))
+}
+
+/// Range at which rings are put in elevation order, metres.
+const ORDER_RANGE_M: f64 = 10.0;
+
+/// Offsets below this (rad m, a 5 mm lever) are no offset.
+const MIN_PARALLAX_RAD_M: f64 = 0.005;
+
+/// The measured offset of the nearest ring (by ring number) that has one.
+fn nearest_measured(measured: &[(usize, f64)], row: usize) -> f64 {
+    measured
+        .iter()
+        .min_by_key(|(r, _)| r.abs_diff(row))
+        .map_or(0.0, |(_, c)| *c)
+}
+
+/// A laser's measured elevation against range: `beam + c / range`; `c`
+/// unknown (`None`) where the ranges did not spread enough to tell.
+#[derive(Debug, Clone, Copy)]
+struct ElevationModel {
+    beam_rad: f64,
+    parallax_rad_m: Option<f64>,
+    /// Median elevation and inverse range of the returns, to re-anchor the
+    /// beam when `c` comes from a neighbour.
+    median_elevation_rad: f64,
+    median_inverse_range: f64,
+}
+
+impl ElevationModel {
+    fn elevation_at(&self, range_m: f64) -> f64 {
+        self.beam_rad + self.parallax_rad_m.unwrap_or(0.0) / range_m
+    }
+
+    /// The same laser with the offset `c`, through its median return.
+    fn with_parallax(&self, c: f64) -> Self {
+        match self.parallax_rad_m {
+            Some(_) => *self,
+            None => Self {
+                beam_rad: self.median_elevation_rad - c * self.median_inverse_range,
+                parallax_rad_m: Some(c),
+                ..*self
+            },
+        }
+    }
+
+    /// Least squares of elevation on inverse range, once more without the
+    /// returns beyond 3 robust sigmas (mixed pixels, specks). The median
+    /// elevation (no parallax) where the ranges do not spread enough to
+    /// tell, or the slope is not a laser offset (beyond 0.5 m).
+    fn fit(samples: &mut [(f32, f32)]) -> Option<Self> {
+        if samples.is_empty() {
+            return None;
+        }
+        samples.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let median = f64::from(samples[samples.len() / 2].1);
+        let mut inverse: Vec<f32> = samples.iter().map(|s| s.0).collect();
+        let mid = inverse.len() / 2;
+        let median_inverse_range =
+            f64::from(*inverse.select_nth_unstable_by(mid, f32::total_cmp).1);
+        let flat = Self {
+            beam_rad: median,
+            parallax_rad_m: None,
+            median_elevation_rad: median,
+            median_inverse_range,
+        };
+        if samples.len() < 32 {
+            return Some(flat);
+        }
+        let Some(mut model) = least_squares(
+            samples.iter().map(|&(u, e)| (f64::from(u), f64::from(e))),
+            flat,
+        ) else {
+            return Some(flat);
+        };
+        let mut residuals: Vec<f64> = samples
+            .iter()
+            .map(|&(u, e)| (f64::from(e) - model.elevation_at(1.0 / f64::from(u))).abs())
+            .collect();
+        residuals.sort_by(f64::total_cmp);
+        let gate = 3.0 * 1.4826 * residuals[residuals.len() / 2] + 1e-5;
+        let first = model;
+        model = least_squares(
+            samples.iter().filter_map(|&(u, e)| {
+                let (u, e) = (f64::from(u), f64::from(e));
+                ((e - first.elevation_at(1.0 / u)).abs() <= gate).then_some((u, e))
+            }),
+            flat,
+        )
+        .unwrap_or(first);
+        if model.parallax_rad_m.is_some_and(|c| c.abs() > 0.5) {
+            return Some(flat);
+        }
+        Some(model)
+    }
+}
+
+/// `(beam, c)` minimising the squares of `e - beam - c u` over `(u, e)`;
+/// `None` when the inverse ranges do not spread (a slope would be noise).
+fn least_squares(
+    samples: impl Iterator<Item = (f64, f64)>,
+    medians: ElevationModel,
+) -> Option<ElevationModel> {
+    let (mut n, mut su, mut se, mut suu, mut sue) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (u, e) in samples {
+        if !(u.is_finite() && e.is_finite()) {
+            continue;
+        }
+        n += 1.0;
+        su += u;
+        se += e;
+        suu += u * u;
+        sue += u * e;
+    }
+    if n < 8.0 {
+        return None;
+    }
+    let variance_u = suu / n - (su / n).powi(2);
+    // Inverse ranges spreading less than 1/200 m^-1 (all returns at one
+    // range) cannot tell an offset from the beam angle.
+    if variance_u.is_nan() || variance_u.sqrt() <= 0.005 {
+        return None;
+    }
+    let slope = (sue / n - su / n * se / n) / variance_u;
+    Some(ElevationModel {
+        beam_rad: se / n - slope * su / n,
+        parallax_rad_m: Some(slope),
+        ..medians
+    })
 }

@@ -18,6 +18,7 @@
 //! lights up the static world.
 
 pub mod beams;
+pub mod egomotion;
 pub mod grid;
 mod surface;
 pub mod threat;
@@ -58,6 +59,9 @@ pub struct EngineConfig {
     /// change beyond it between two scans means the ray met another surface
     /// (occlusion or disocclusion), not motion.
     pub max_closing_speed_mps: f64,
+    /// Where no source measured the velocity or the angular rate over a
+    /// pair, estimate them from the static world (`engine::egomotion`).
+    pub estimate_ego_motion: bool,
 }
 
 impl Default for EngineConfig {
@@ -70,8 +74,9 @@ impl Default for EngineConfig {
             threat_ttc_s: [3.0, 1.5, 1.0],
             moving_sigmas: 4.0,
             moving_min_per_s: 0.15,
-            grazing_cos: 0.15,
+            grazing_cos: 0.05,
             max_closing_speed_mps: 30.0,
+            estimate_ego_motion: true,
         }
     }
 }
@@ -146,6 +151,10 @@ pub struct PairLooming {
     pub spheres: Option<[ThreatSphere; 3]>,
     /// LiDAR velocity used for the spheres, m/s.
     pub velocity_mps: Option<[f64; 3]>,
+    /// LiDAR angular velocity at the current stamp, rad/s.
+    pub angular_velocity_radps: Option<[f64; 3]>,
+    /// The motion estimated from the static world, where a source was missing.
+    pub ego_estimate: Option<egomotion::EgoEstimate>,
 }
 
 /// The gridded scan and its surfaces, kept from one pair to the next: the
@@ -160,6 +169,7 @@ struct CachedScan {
     rows: usize,
     cols: usize,
     ring_to_row: Option<Vec<usize>>,
+    parallax_rad_m: Option<Vec<f64>>,
     image: RangeImage,
     surfaces: Surfaces,
 }
@@ -170,6 +180,7 @@ impl CachedScan {
             && self.rows == geometry.rows
             && self.cols == geometry.cols
             && self.ring_to_row == geometry.ring_to_row
+            && self.parallax_rad_m == geometry.parallax_rad_m
             // Rows from elevation depend on the whole beam table.
             && geometry.ring_to_row.is_some()
     }
@@ -223,6 +234,7 @@ pub fn compute_with_cache(
         rows: geometry.rows,
         cols: geometry.cols,
         ring_to_row: geometry.ring_to_row.clone(),
+        parallax_rad_m: geometry.parallax_rad_m.clone(),
         image: cur_image,
         surfaces: cur_surfaces,
     });
@@ -248,26 +260,9 @@ fn compute_from_surfaces(
         previous.time_span_ns().0 - 1_000_000,
         current.time_span_ns().1 + 1_000_000,
     );
-    let rotation_rate_known = pair.motion.angular.is_some();
-    let rotate = config.rotation_compensation && rotation_rate_known;
-    let rotation = Trajectory::integrate(
-        &pair.motion,
-        MotionModel::RotationOnly,
-        rotate,
-        start_ns,
-        end_ns,
-    )?;
-    let full = Trajectory::integrate(
-        &pair.motion,
-        MotionModel::Full,
-        rotation_rate_known,
-        start_ns,
-        end_ns,
-    );
     let source = warp::Source {
         surfaces: prev_surfaces,
         time_ns: &prev_time,
-        range_noise_m: config.range_noise_m,
     };
     let target = warp::Target {
         surfaces: cur_surfaces,
@@ -275,6 +270,35 @@ fn compute_from_surfaces(
         column_time_ns: &column_time,
     };
     let offset_ns = current.stamp_ns - previous.stamp_ns;
+    let span = (start_ns, end_ns);
+    let estimated = (config.estimate_ego_motion
+        && (pair.motion.velocity.is_none() || pair.motion.angular.is_none()))
+    .then(|| {
+        estimate_motion(
+            pair,
+            &source,
+            &target,
+            &geometry,
+            cur_surfaces,
+            &cur_time,
+            config,
+            span,
+        )
+    })
+    .flatten();
+    let motion = estimated.as_ref().map_or(&pair.motion, |(m, _)| m);
+    let ego_estimate = estimated.as_ref().map(|(_, e)| *e);
+    let rotation_rate_known = motion.angular.is_some();
+    let rotate = config.rotation_compensation && rotation_rate_known;
+    let rotation =
+        Trajectory::integrate(motion, MotionModel::RotationOnly, rotate, start_ns, end_ns)?;
+    let full = Trajectory::integrate(
+        motion,
+        MotionModel::Full,
+        rotation_rate_known,
+        start_ns,
+        end_ns,
+    );
     let (rotated, moved) = rayon::join(
         || warp::render(&source, &target, &geometry, &rotation, offset_ns),
         || {
@@ -289,12 +313,13 @@ fn compute_from_surfaces(
         &cur_time,
         &rotated,
         moved.as_ref(),
-        &pair.motion,
+        motion,
     );
-    let velocity = pair.motion.velocity_at(current.stamp_ns);
-    let l_ego = ego_looming(current, pair);
+    let velocity = motion.velocity_at(current.stamp_ns);
+    let angular = motion.angular_velocity_at(current.stamp_ns);
+    let l_ego = ego_looming(current, motion);
     let point_threat = point_threats(cur_image, &cells.threat);
-    let range_noise_m_per_row = vec![config.range_noise_m as f32; geometry.rows];
+    let range_noise_m_per_row = cur_surfaces.noise_m_per_row.clone();
     Some(PairLooming {
         availability: Availability {
             ego_velocity: full.is_some(),
@@ -302,6 +327,8 @@ fn compute_from_surfaces(
         },
         spheres: velocity.map(|v| threat::spheres(&v, &config.threat_ttc_s)),
         velocity_mps: velocity.map(|v| [v.x, v.y, v.z]),
+        angular_velocity_radps: angular.map(|w| [w.x, w.y, w.z]),
+        ego_estimate,
         image: cur_image.clone(),
         geometry,
         l_lidar: cells.l_lidar,
@@ -321,6 +348,97 @@ fn compute_from_surfaces(
         l_ego,
         point_threat,
     })
+}
+
+/// Renders of the previous scan tried to estimate the motion.
+const ESTIMATE_ITERATIONS: usize = 4;
+
+/// The pair's motion with what no source measured estimated from the static
+/// world: the previous scan is rendered with a trial motion, corrected
+/// until the static surfaces meet (`egomotion`). Constant over the pair.
+#[allow(clippy::too_many_arguments)]
+fn estimate_motion(
+    pair: &ScanPair,
+    source: &warp::Source,
+    target: &warp::Target,
+    geometry: &ImageGeometry,
+    current: &Surfaces,
+    current_time: &[StampNs],
+    config: &EngineConfig,
+    (start_ns, end_ns): (StampNs, StampNs),
+) -> Option<(PairMotion, egomotion::EgoEstimate)> {
+    let stamp_ns = pair.current.stamp_ns;
+    let measured = &pair.motion;
+    let prior = egomotion::Prior {
+        rotation_known: measured.angular.is_some(),
+        velocity_known: measured.velocity.is_some(),
+    };
+    let mut angular = measured
+        .angular_velocity_at(stamp_ns)
+        .unwrap_or_else(Vector3::zeros);
+    let mut velocity = measured
+        .velocity_at(stamp_ns)
+        .unwrap_or_else(Vector3::zeros);
+    let offset_ns = stamp_ns - pair.previous.stamp_ns;
+    let mut fit = None;
+    for _ in 0..ESTIMATE_ITERATIONS {
+        let trial = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
+        let trajectory = Trajectory::integrate(&trial, MotionModel::Full, true, start_ns, end_ns)?;
+        let rendered = warp::render(source, target, geometry, &trajectory, offset_ns);
+        let Some((d_angular, d_velocity, inliers, scale)) = egomotion::correction(
+            current,
+            current_time,
+            &rendered,
+            config.range_noise_m,
+            &prior,
+        ) else {
+            break;
+        };
+        angular += d_angular;
+        velocity += d_velocity;
+        fit = Some((inliers, scale));
+        // Converged: the update moves the surface by less than a millimetre.
+        let dt_s = offset_ns as f64 * 1e-9;
+        if (d_velocity.norm() + d_angular.norm() * 10.0) * dt_s < 1e-3 {
+            break;
+        }
+    }
+    let (inlier_cells, residual_m) = fit?;
+    let motion = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
+    Some((
+        motion,
+        egomotion::EgoEstimate {
+            velocity_mps: [velocity.x, velocity.y, velocity.z],
+            angular_velocity_radps: [angular.x, angular.y, angular.z],
+            inlier_cells,
+            residual_m,
+            velocity_estimated: !prior.velocity_known,
+            rotation_estimated: !prior.rotation_known,
+        },
+    ))
+}
+
+/// `motion` with the series no source measured replaced by constants.
+fn with_constant_motion(
+    motion: &PairMotion,
+    velocity: Vector3<f64>,
+    angular: Vector3<f64>,
+    start_ns: StampNs,
+    end_ns: StampNs,
+) -> PairMotion {
+    let constant = |value: Vector3<f64>| {
+        crate::pairing::TimeSeries::new(vec![(start_ns, value), (end_ns, value)], 1.0)
+    };
+    PairMotion {
+        velocity: Some(
+            motion
+                .velocity
+                .clone()
+                .unwrap_or_else(|| constant(velocity)),
+        ),
+        angular: Some(motion.angular.clone().unwrap_or_else(|| constant(angular))),
+        ..motion.clone()
+    }
 }
 
 /// Absolute time of each cell's return, ns.
@@ -346,9 +464,10 @@ fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)>
     surfaces
         .direction
         .iter()
-        .map(|d| {
+        .zip(&surfaces.range_m)
+        .map(|(d, &range_m)| {
             let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
-            let row = geometry.row_f(z.atan2(x.hypot(y)));
+            let row = geometry.row_f_at(z.atan2(x.hypot(y)), f64::from(range_m));
             let col = geometry.col_f(y.atan2(x));
             (row as f32, col as f32)
         })
@@ -544,6 +663,31 @@ fn raw_cell(
                 .abs()
                 < CREASE_COS
     };
+    {
+        use std::sync::atomic::Ordering::Relaxed;
+        let c = &DBG;
+        c[0].fetch_add(1, Relaxed);
+        if current.edge[cell] {
+            c[1].fetch_add(1, Relaxed);
+        }
+        if creased(&rotated.normal[cell]) {
+            c[2].fetch_add(1, Relaxed);
+            let n = rotated.normal[cell];
+            let m = current_normal;
+            let dot = (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]).abs();
+            let k = ((dot * 10.0) as usize).min(9);
+            c[6 + k].fetch_add(1, Relaxed);
+            if current.incidence_cos[cell] < 0.3 {
+                c[4].fetch_add(1, Relaxed);
+            }
+            if current.support[cell] < 8 {
+                c[5].fetch_add(1, Relaxed);
+            }
+        }
+        if moved.is_some_and(|m| creased(&m.normal[cell])) {
+            c[3].fetch_add(1, Relaxed);
+        }
+    }
     if creased(&rotated.normal[cell])
         || moved.is_some_and(|m| creased(&m.normal[cell]))
         || rotated.edge[cell]
@@ -595,8 +739,9 @@ fn raw_cell(
     // Both ranges are plane fits of several returns; the rendered one mixes
     // three vertices: about sigma / sqrt(2) each, conservatively.
     let support = f64::from(current.support[cell].max(1));
-    let sigma_now = config.range_noise_m * (1.0 / support).sqrt().max(0.4);
-    let sigma_before = config.range_noise_m * 0.6;
+    let noise_m = current.noise_m(cell);
+    let sigma_now = noise_m * (1.0 / support).sqrt().max(0.4);
+    let sigma_before = noise_m * 0.6;
     let sigma = (sigma_now.powi(2) + sigma_before.powi(2)).sqrt() / (dt_s * range_now);
     Raw {
         l_lidar: l_lidar as f32,
@@ -704,13 +849,13 @@ fn fuse(
 }
 
 /// `L_ego = (t . p)/(p . p)` per point, `t` at the point's own time.
-fn ego_looming(scan: &Scan, pair: &ScanPair) -> Vec<f32> {
+fn ego_looming(scan: &Scan, motion: &PairMotion) -> Vec<f32> {
     (0..scan.points_m.len())
         .into_par_iter()
         .map(|i| {
             let offset_s = scan.time_offset_s.as_ref().map_or(0.0, |t| f64::from(t[i]));
             let t_ns = scan.stamp_ns + (offset_s * 1e9).round() as StampNs;
-            let Some(velocity) = pair.motion.velocity_at(t_ns) else {
+            let Some(velocity) = motion.velocity_at(t_ns) else {
                 return f32::NAN;
             };
             let p = scan.points_m[i];
@@ -735,3 +880,6 @@ fn point_threats(image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel>
         })
         .collect()
 }
+
+pub static DBG: [std::sync::atomic::AtomicUsize; 16] =
+    [const { std::sync::atomic::AtomicUsize::new(0) }; 16];

@@ -17,8 +17,6 @@ pub struct Source<'a> {
     pub surfaces: &'a Surfaces,
     /// Absolute time of each cell's return, ns (meaningful where range is set).
     pub time_ns: &'a [StampNs],
-    /// Range noise (1 sigma), metres, for the same-surface test.
-    pub range_noise_m: f64,
 }
 
 /// The rays to render into.
@@ -48,6 +46,9 @@ pub struct Rendered {
 #[derive(Clone, Copy)]
 struct Vertex {
     position: Point3<f64>,
+    /// The source surface's fitted normal, in the target frame (zero where
+    /// none was fitted).
+    normal: Vector3<f64>,
     row: f64,
     col: f64,
     time_ns: StampNs,
@@ -88,9 +89,10 @@ pub fn render(
             vertices[row * geometry.cols + col] = vertex;
         }
     }
+    let proxy = fill_dropouts(source, geometry, &mut vertices);
     let candidates: Vec<Vec<Candidate>> = (0..geometry.rows.saturating_sub(1))
         .into_par_iter()
-        .map(|row| rasterize_row(source, target, geometry, &vertices, row))
+        .map(|row| rasterize_row(source, target, geometry, &vertices, &proxy, row))
         .collect();
     let mut range_m = vec![f32::NAN; cells];
     let mut source_time_ns = vec![0; cells];
@@ -170,7 +172,8 @@ fn warp_vertex(
     // It will be seen again about one scan later; refine with the firing time
     // of the column it lands in (a rolling sweep fires columns at different times).
     let seen_ns = measured_ns + scan_offset_ns;
-    let mut moved = cache.get(trajectory, measured_ns, seen_ns) * point;
+    let mut transform = cache.get(trajectory, measured_ns, seen_ns);
+    let mut moved = transform * point;
     let col = geometry.col_of(moved.y.atan2(moved.x));
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
@@ -179,16 +182,61 @@ fn warp_vertex(
         if (column_ns - seen_ns).abs() > scan_offset_ns.abs() / 4 {
             return None;
         }
-        moved = cache.get(trajectory, measured_ns, column_ns) * point;
+        transform = cache.get(trajectory, measured_ns, column_ns);
+        moved = transform * point;
     }
+    let n = source.surfaces.normal[cell];
+    let normal =
+        transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
     let azimuth = moved.y.atan2(moved.x);
     let elevation = moved.z.atan2(moved.x.hypot(moved.y));
     Some(Vertex {
         position: moved,
-        row: geometry.row_f(elevation),
+        normal,
+        row: geometry.row_f_at(elevation, moved.coords.norm()),
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })
+}
+
+/// Bridges one-cell dropouts of the source (a laser that returned nothing
+/// there: dark paint, a window, a missed echo; a few percent of real
+/// returns) so the mesh keeps its triangles around them: the missing vertex
+/// is the midpoint of its row neighbours when they lie on one surface.
+/// Returns, per cell, the source cell whose surface the vertex stands for
+/// (itself, or the left neighbour of a bridged dropout).
+fn fill_dropouts(
+    source: &Source,
+    geometry: &ImageGeometry,
+    vertices: &mut [Option<Vertex>],
+) -> Vec<u32> {
+    let cols = geometry.cols;
+    let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
+    for row in 0..geometry.rows {
+        for col in 0..cols {
+            let cell = row * cols + col;
+            if vertices[cell].is_some() || source.surfaces.range_m[cell].is_finite() {
+                continue;
+            }
+            let left = row * cols + (col + cols - 1) % cols;
+            let right = row * cols + (col + 1) % cols;
+            let (Some(a), Some(b)) = (vertices[left], vertices[right]) else {
+                continue;
+            };
+            if !same_surface(source, left, right) || (a.col - b.col).abs() > 3.0 {
+                continue;
+            }
+            vertices[cell] = Some(Vertex {
+                position: Point3::from((a.position.coords + b.position.coords) * 0.5),
+                normal: (a.normal + b.normal) * 0.5,
+                row: 0.5 * (a.row + b.row),
+                col: 0.5 * (a.col + b.col),
+                time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
+            });
+            proxy[cell] = left as u32;
+        }
+    }
+    proxy
 }
 
 /// Whether two neighbouring source cells lie on one surface (so a triangle
@@ -201,7 +249,8 @@ fn same_surface(source: &Source, a: usize, b: usize) -> bool {
     };
     let (pa, pb) = (point(a), point(b));
     let gap = pb - pa;
-    let tolerance = 4.0 * source.range_noise_m + 0.05 * gap.norm();
+    let noise_m = s.noise_m(a).max(s.noise_m(b));
+    let tolerance = 4.0 * noise_m + 0.05 * gap.norm();
     let off_plane = |c: usize, other: &Vector3<f64>| {
         let n = s.normal[c];
         let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
@@ -214,7 +263,7 @@ fn same_surface(source: &Source, a: usize, b: usize) -> bool {
         // No plane: fall back to a range-ratio test.
         _ => {
             let (ra, rb) = (f64::from(s.range_m[a]), f64::from(s.range_m[b]));
-            (ra - rb).abs() <= 0.05 * ra.max(rb) + 4.0 * source.range_noise_m
+            (ra - rb).abs() <= 0.05 * ra.max(rb) + 4.0 * noise_m
         }
     }
 }
@@ -225,6 +274,7 @@ fn rasterize_row(
     target: &Target,
     geometry: &ImageGeometry,
     vertices: &[Option<Vertex>],
+    proxy: &[u32],
     row: usize,
 ) -> Vec<Candidate> {
     let cols = geometry.cols;
@@ -239,14 +289,16 @@ fn rasterize_row(
             let (Some(vi), Some(vj), Some(vk)) = (vertices[i], vertices[j], vertices[k]) else {
                 continue;
             };
-            if !(same_surface(source, i, j)
-                && same_surface(source, j, k)
-                && same_surface(source, i, k))
-            {
+            let on_one_surface = |a: usize, b: usize| {
+                let (a, b) = (proxy[a] as usize, proxy[b] as usize);
+                a == b || same_surface(source, a, b)
+            };
+            if !(on_one_surface(i, j) && on_one_surface(j, k) && on_one_surface(i, k)) {
                 continue;
             }
-            let edge =
-                source.surfaces.edge[i] || source.surfaces.edge[j] || source.surfaces.edge[k];
+            let edge = [i, j, k]
+                .iter()
+                .any(|&v| source.surfaces.edge[proxy[v] as usize]);
             rasterize_triangle(target, geometry, [vi, vj, vk], edge, &mut out);
         }
     }
@@ -289,7 +341,15 @@ fn rasterize_triangle(
     }
     let normal = (v[1].position - v[0].position).cross(&(v[2].position - v[0].position));
     let plane_offset = normal.dot(&v[0].position.coords);
-    let unit = normal / normal.norm().max(1e-300);
+    // The surface's orientation from the vertices' fitted planes, not from
+    // the triangle: over a few centimetres between neighbouring lasers, per-
+    // laser range biases tilt a triangle by tens of degrees.
+    let fitted = v[0].normal + v[1].normal + v[2].normal;
+    let unit = if fitted.norm_squared() > 0.5 {
+        fitted.normalize()
+    } else {
+        normal / normal.norm().max(1e-300)
+    };
     let row_lo = (r_min.floor().max(0.0)) as usize;
     let row_hi = (r_max.ceil() as usize).min(geometry.rows - 1);
     for row in row_lo..=row_hi {

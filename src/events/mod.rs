@@ -666,6 +666,7 @@ mod tests {
                     .collect(),
             },
             ring_to_row: None,
+            parallax_rad_m: None,
         };
         assert_eq!(default_min_cells(&geometry(64, 2048)), 40);
         assert_eq!(default_min_cells(&geometry(32, 512)), 5);

@@ -1,0 +1,170 @@
+//! The LiDAR's motion over a pair estimated from the static world itself:
+//! where a log has no gyro or no velocity source (KITTI `.bin` drives, most
+//! converted logs), the previous scan is moved by a trial motion, rendered
+//! into the current rays, and the motion corrected until the static surfaces
+//! meet (point-to-plane alignment, linearised, robustly weighted so movers
+//! and edges do not pull it).
+//!
+//! For a static surface with normal `n` (facing the sensor) seen along `e`
+//! at `X = R e`, a small extra motion `(w, v)` over `dt` moves the surface by
+//! `-(v + w x X) dt`, so the rendered range changes by
+//!
+//!     dR = -dt ((X x n) . w + n . v) / (n . e)
+//!
+//! Each trusted cell gives one equation `(n . e) (R_now - R_render) =
+//! -dt ((X x n) . w + n . v)`, in metres along the normal; six unknowns,
+//! solved by iteratively reweighted least squares.
+
+use nalgebra::{Matrix6, Vector3, Vector6};
+
+use super::surface::Surfaces;
+use super::warp::Rendered;
+use crate::messages::StampNs;
+
+/// What was estimated for a pair, in the LiDAR frame at the current scan.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct EgoEstimate {
+    pub velocity_mps: [f64; 3],
+    pub angular_velocity_radps: [f64; 3],
+    /// Cells whose equation took part (weight above one half).
+    pub inlier_cells: usize,
+    /// Robust scale of the remaining misfit along the normals, metres.
+    pub residual_m: f64,
+    /// The velocity came from the data (no velocity source covered the pair).
+    pub velocity_estimated: bool,
+    /// The angular velocity came from the data (no gyro or twist rate).
+    pub rotation_estimated: bool,
+}
+
+/// One cell's equation.
+#[derive(Clone, Copy)]
+struct Equation {
+    /// `-dt (X x n, n)`.
+    jacobian: Vector6<f64>,
+    /// `(n . e) (R_now - R_render)`, metres.
+    misfit_m: f64,
+}
+
+/// The correction `(w, v)` to add to the motion the render was made with,
+/// and the robust misfit scale; `None` without enough static surface to
+/// pin the motion down.
+pub fn correction(
+    current: &Surfaces,
+    current_time_ns: &[StampNs],
+    rendered: &Rendered,
+    range_noise_m: f64,
+    prior: &Prior,
+) -> Option<(Vector3<f64>, Vector3<f64>, usize, f64)> {
+    let equations = equations(current, current_time_ns, rendered);
+    if equations.len() < MIN_EQUATIONS {
+        return None;
+    }
+    let mut misfits: Vec<f64> = equations.iter().map(|e| e.misfit_m.abs()).collect();
+    let median = median_in_place(&mut misfits);
+    // The scale of a static surface's misfit: no smaller than the noise.
+    let scale = (1.4826 * median).max(2.0 * range_noise_m);
+    let mut normal = Matrix6::<f64>::zeros();
+    let mut rhs = Vector6::<f64>::zeros();
+    let mut inliers = 0;
+    for eq in &equations {
+        // Cauchy weights: movers and unmasked edges count for little.
+        let u = eq.misfit_m / (CAUCHY_K * scale);
+        let w = 1.0 / (1.0 + u * u);
+        if w > 0.5 {
+            inliers += 1;
+        }
+        normal += eq.jacobian * eq.jacobian.transpose() * w;
+        rhs += eq.jacobian * (eq.misfit_m * w);
+    }
+    // Damping: the motion along directions no surface constrains (a
+    // corridor of road and side walls says nothing of forward motion) stays
+    // at the trial value instead of wandering; a measured quantity is only
+    // refined where the data overwhelm its source.
+    let typical = normal.trace() / 6.0 + 1e-12;
+    for k in 0..6 {
+        let known = if k < 3 {
+            prior.rotation_known
+        } else {
+            prior.velocity_known
+        };
+        normal[(k, k)] += typical * if known { KNOWN_WEIGHT } else { DAMPING };
+    }
+    let solution = normal.cholesky()?.solve(&rhs);
+    if !solution.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    Some((
+        Vector3::new(solution[0], solution[1], solution[2]),
+        Vector3::new(solution[3], solution[4], solution[5]),
+        inliers,
+        scale,
+    ))
+}
+
+/// Which parts of the motion a source measured: those stay as measured.
+#[derive(Debug, Clone, Copy)]
+pub struct Prior {
+    pub rotation_known: bool,
+    pub velocity_known: bool,
+}
+
+/// Prior weight of a measured quantity, relative to the data's typical weight.
+const KNOWN_WEIGHT: f64 = 1e6;
+/// Prior weight of an unmeasured quantity (damping only).
+const DAMPING: f64 = 1e-6;
+const MIN_EQUATIONS: usize = 200;
+/// Cauchy constant (in robust sigmas).
+const CAUCHY_K: f64 = 2.5;
+
+fn equations(
+    current: &Surfaces,
+    current_time_ns: &[StampNs],
+    rendered: &Rendered,
+) -> Vec<Equation> {
+    (0..current.range_m.len())
+        .filter_map(|cell| {
+            let range_now = f64::from(current.range_m[cell]);
+            let range_before = f64::from(rendered.range_m[cell]);
+            if !(range_now.is_finite() && range_before.is_finite())
+                || current.edge[cell]
+                || rendered.edge[cell]
+            {
+                return None;
+            }
+            let n = current.normal[cell];
+            let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+            if n.norm_squared() < 0.5 {
+                return None;
+            }
+            let d = current.direction[cell];
+            let e = Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
+            let facing = n.dot(&e);
+            if facing.abs() < MIN_INCIDENCE_COS {
+                return None;
+            }
+            let dt_s = (current_time_ns[cell] - rendered.source_time_ns[cell]) as f64 * 1e-9;
+            if dt_s <= 0.0 {
+                return None;
+            }
+            let x = e * range_now;
+            let jacobian =
+                -dt_s * Vector6::from_iterator(x.cross(&n).iter().chain(n.iter()).copied());
+            Some(Equation {
+                jacobian,
+                misfit_m: facing * (range_now - range_before),
+            })
+        })
+        .collect()
+}
+
+/// Cells seen more obliquely than this take no part: their rendered range
+/// is the least certain.
+const MIN_INCIDENCE_COS: f64 = 0.2;
+
+fn median_in_place(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
