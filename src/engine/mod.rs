@@ -172,6 +172,10 @@ struct CachedScan {
     parallax_rad_m: Option<Vec<f64>>,
     image: RangeImage,
     surfaces: Surfaces,
+    /// The motion estimated for the pair that ended at this scan (velocity,
+    /// angular velocity): the next pair's first guess, as a vehicle's motion
+    /// changes little in one scan period.
+    estimate: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
 impl CachedScan {
@@ -201,10 +205,12 @@ pub fn compute_with_cache(
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = grid::geometry_for(previous, current, config.columns)?;
     let params = SurfaceParams::for_geometry(&geometry, config.range_noise_m);
-    let cached = cache
-        .last
-        .take()
-        .filter(|c| c.matches(&pair.previous, &geometry));
+    let last = cache.last.take();
+    let previous_estimate = last
+        .as_ref()
+        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
+        .and_then(|c| c.estimate);
+    let cached = last.filter(|c| c.matches(&pair.previous, &geometry));
     let ((prev_image, prev_surfaces), (cur_image, cur_surfaces)) = rayon::join(
         || match cached {
             Some(c) => (c.image, c.surfaces),
@@ -224,11 +230,16 @@ pub fn compute_with_cache(
         pair,
         config,
         &geometry,
-        &prev_image,
-        &prev_surfaces,
-        &cur_image,
-        &cur_surfaces,
+        (&prev_image, &prev_surfaces),
+        (&cur_image, &cur_surfaces),
+        previous_estimate,
     );
+    let estimate = result.as_ref().and_then(|r| r.ego_estimate).map(|e| {
+        (
+            Vector3::from(e.velocity_mps),
+            Vector3::from(e.angular_velocity_radps),
+        )
+    });
     cache.last = Some(CachedScan {
         scan: pair.current.clone(),
         rows: geometry.rows,
@@ -237,6 +248,7 @@ pub fn compute_with_cache(
         parallax_rad_m: geometry.parallax_rad_m.clone(),
         image: cur_image,
         surfaces: cur_surfaces,
+        estimate,
     });
     result
 }
@@ -245,10 +257,9 @@ fn compute_from_surfaces(
     pair: &ScanPair,
     config: &EngineConfig,
     geometry: &ImageGeometry,
-    prev_image: &RangeImage,
-    prev_surfaces: &Surfaces,
-    cur_image: &RangeImage,
-    cur_surfaces: &Surfaces,
+    (prev_image, prev_surfaces): (&RangeImage, &Surfaces),
+    (cur_image, cur_surfaces): (&RangeImage, &Surfaces),
+    first_guess: Option<(Vector3<f64>, Vector3<f64>)>,
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = geometry.clone();
@@ -279,10 +290,10 @@ fn compute_from_surfaces(
             &source,
             &target,
             &geometry,
-            cur_surfaces,
-            &cur_time,
+            (cur_surfaces, &cur_time),
             config,
             span,
+            first_guess,
         )
     })
     .flatten();
@@ -351,7 +362,7 @@ fn compute_from_surfaces(
 }
 
 /// Renders of the previous scan tried to estimate the motion.
-const ESTIMATE_ITERATIONS: usize = 4;
+const ESTIMATE_ITERATIONS: usize = 8;
 
 /// The pair's motion with what no source measured estimated from the static
 /// world: the previous scan is rendered with a trial motion, corrected
@@ -362,10 +373,10 @@ fn estimate_motion(
     source: &warp::Source,
     target: &warp::Target,
     geometry: &ImageGeometry,
-    current: &Surfaces,
-    current_time: &[StampNs],
+    (current, current_time): (&Surfaces, &[StampNs]),
     config: &EngineConfig,
     (start_ns, end_ns): (StampNs, StampNs),
+    first_guess: Option<(Vector3<f64>, Vector3<f64>)>,
 ) -> Option<(PairMotion, egomotion::EgoEstimate)> {
     let stamp_ns = pair.current.stamp_ns;
     let measured = &pair.motion;
@@ -373,12 +384,12 @@ fn estimate_motion(
         rotation_known: measured.angular.is_some(),
         velocity_known: measured.velocity.is_some(),
     };
+    let (guess_velocity, guess_angular) =
+        first_guess.unwrap_or((Vector3::zeros(), Vector3::zeros()));
     let mut angular = measured
         .angular_velocity_at(stamp_ns)
-        .unwrap_or_else(Vector3::zeros);
-    let mut velocity = measured
-        .velocity_at(stamp_ns)
-        .unwrap_or_else(Vector3::zeros);
+        .unwrap_or(guess_angular);
+    let mut velocity = measured.velocity_at(stamp_ns).unwrap_or(guess_velocity);
     let offset_ns = stamp_ns - pair.previous.stamp_ns;
     let mut fit = None;
     for _ in 0..ESTIMATE_ITERATIONS {
