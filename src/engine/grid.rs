@@ -9,6 +9,9 @@ use crate::messages::Scan;
 
 use super::beams::BeamTable;
 
+/// Beam spacing over column spacing beyond which rows are sparse.
+const SPARSE_ROW_RATIO: f64 = 12.0;
+
 /// Marks an empty cell in `point`.
 pub const NO_POINT: u32 = u32::MAX;
 
@@ -84,6 +87,21 @@ impl ImageGeometry {
 
     pub fn cells(&self) -> usize {
         self.rows * self.cols
+    }
+
+    /// Beams much further apart than columns (an 8- or 16-beam sensor with
+    /// thousands of columns: OS0-8's beams are 11 degrees apart, its
+    /// columns 0.18): neighbouring beams see different surfaces, so
+    /// surfaces are fitted and rendered along each beam's ring instead of
+    /// across beams.
+    pub fn sparse_rows(&self) -> bool {
+        let e = &self.beams.elevations_rad;
+        if e.len() < 2 || self.cols == 0 {
+            return e.len() == 1;
+        }
+        let row_step = (e[e.len() - 1] - e[0]) / (e.len() - 1) as f64;
+        let col_step = TAU / self.cols as f64;
+        row_step > SPARSE_ROW_RATIO * col_step
     }
 
     /// The cells around `cell` within `half_rows` beams and `half_cols`

@@ -282,7 +282,11 @@ fn compute_from_surfaces(
     };
     let offset_ns = current.stamp_ns - previous.stamp_ns;
     let span = (start_ns, end_ns);
+    // Not on sparse sensors: a ring's orientation there is a prior (ground
+    // or vertical), too rough to pin down a motion (on OS0-8 the estimate
+    // drifted to four times the platform's speed).
     let estimated = (config.estimate_ego_motion
+        && !geometry.sparse_rows()
         && (pair.motion.velocity.is_none() || pair.motion.angular.is_none()))
     .then(|| {
         estimate_motion(
@@ -674,33 +678,18 @@ fn raw_cell(
                 .abs()
                 < CREASE_COS
     };
-    {
-        use std::sync::atomic::Ordering::Relaxed;
-        let c = &DBG;
-        c[0].fetch_add(1, Relaxed);
-        if current.edge[cell] {
-            c[1].fetch_add(1, Relaxed);
-        }
-        if creased(&rotated.normal[cell]) {
-            c[2].fetch_add(1, Relaxed);
-            let n = rotated.normal[cell];
-            let m = current_normal;
-            let dot = (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]).abs();
-            let k = ((dot * 10.0) as usize).min(9);
-            c[6 + k].fetch_add(1, Relaxed);
-            if current.incidence_cos[cell] < 0.3 {
-                c[4].fetch_add(1, Relaxed);
-            }
-            if current.support[cell] < 8 {
-                c[5].fetch_add(1, Relaxed);
-            }
-        }
-        if moved.is_some_and(|m| creased(&m.normal[cell])) {
-            c[3].fetch_add(1, Relaxed);
-        }
-    }
-    if creased(&rotated.normal[cell])
-        || moved.is_some_and(|m| creased(&m.normal[cell]))
+    // Where the ego-moved previous surface meets the current return within
+    // the noise, the two are one static surface whatever their fitted
+    // normals say (on a real sensor a normal from 15 returns can be tens of
+    // degrees off at grazing incidence or where a window holds two lasers'
+    // biases): no crease there.
+    let coincident = moved.is_some_and(|m| {
+        let predicted = f64::from(m.range_m[cell]);
+        let incidence = f64::from(current.incidence_cos[cell]).max(0.3);
+        (predicted - range_now).abs() * incidence <= 3.0 * current.noise_m(cell)
+    });
+    if (!coincident
+        && (creased(&rotated.normal[cell]) || moved.is_some_and(|m| creased(&m.normal[cell]))))
         || rotated.edge[cell]
         || moved.is_some_and(|m| m.edge[cell])
     {
@@ -892,5 +881,3 @@ fn point_threats(image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel>
         .collect()
 }
 
-pub static DBG: [std::sync::atomic::AtomicUsize; 16] =
-    [const { std::sync::atomic::AtomicUsize::new(0) }; 16];

@@ -148,6 +148,12 @@ pub struct SurfaceParams {
     /// 3 beams and about as much azimuth as elevation, so a dense sensor (2048
     /// columns) does not fit planes to points a few centimetres apart.
     pub half_cols: usize,
+    /// Rows too far apart to share a plane (`ImageGeometry::sparse_rows`):
+    /// lines are fitted along each ring instead.
+    pub sparse_rows: bool,
+    /// Height of the ground below the sensor, metres (LiDAR frame z), for
+    /// the orientation of a ring's line on sparse sensors; -inf unknown.
+    pub ground_z_m: f64,
 }
 
 impl SurfaceParams {
@@ -164,6 +170,8 @@ impl SurfaceParams {
         Self {
             range_noise_m,
             half_cols,
+            sparse_rows: geometry.sparse_rows(),
+            ground_z_m: f64::NEG_INFINITY,
         }
     }
 }
@@ -175,8 +183,20 @@ impl Surfaces {
         geometry: &ImageGeometry,
         params: SurfaceParams,
     ) -> Self {
-        let noise_m_per_row = noise_per_row(scan, image, geometry, params);
+        let noise_m_per_row = if params.sparse_rows {
+            row_noise(image, geometry, params.range_noise_m)
+        } else {
+            noise_per_row(scan, image, geometry, params)
+        };
         let returns = Returns { scan, image };
+        let params = SurfaceParams {
+            ground_z_m: if params.sparse_rows {
+                ground_height(scan, image)
+            } else {
+                params.ground_z_m
+            },
+            ..params
+        };
         let fitted: Vec<CellSurface> = (0..geometry.cells())
             .into_par_iter()
             // One scratch buffer per worker: no allocation per cell.
@@ -258,6 +278,9 @@ fn fit_cell(
     params: SurfaceParams,
     scratch: &mut Scratch,
 ) -> CellSurface {
+    if params.sparse_rows {
+        return fit_ring_cell(returns, geometry, cell, params, scratch);
+    }
     let mut best = EMPTY;
     for grow in 1..=3 {
         let (surface, spread) = fit_window(
@@ -388,6 +411,155 @@ fn fit_window(
         edge,
     };
     (surface, Some(spread))
+}
+
+/// The ground's height below a sparse sensor: the median height of the
+/// returns of rays pointing more than 10 degrees down (on an 8-beam sensor
+/// its lowest rings), -inf without any.
+fn ground_height(scan: &Scan, image: &RangeImage) -> f64 {
+    let mut heights: Vec<f32> = image
+        .point
+        .iter()
+        .filter(|&&i| i != NO_POINT)
+        .map(|&i| scan.points_m[i as usize])
+        .filter(|p| p[2] < -(p[0].hypot(p[1])) * DOWN_TAN)
+        .map(|p| p[2])
+        .collect();
+    if heights.len() < 20 {
+        return f64::NEG_INFINITY;
+    }
+    f64::from(median_f32(&mut heights))
+}
+
+/// tan(10 degrees).
+const DOWN_TAN: f32 = 0.176;
+
+/// A cell of a sparse sensor: a line fitted along its ring (the returns of
+/// the same laser in `2 * RING_HALF_WINDOW + 1` columns). One direction
+/// does not give a plane, so the surface's orientation comes from the world
+/// such sensors see: a level line at the ground's height is ground (normal
+/// up), anything else a vertical surface through the line (a wall, a car's
+/// side, a post).
+fn fit_ring_cell(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    params: SurfaceParams,
+    scratch: &mut Scratch,
+) -> CellSurface {
+    let Some(center) = returns.point(cell) else {
+        return EMPTY;
+    };
+    let range = center.norm();
+    let direction = center / range;
+    let as_f32 = |v: &Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+    let raw = CellSurface {
+        range_m: range as f32,
+        direction: as_f32(&direction),
+        support: 1,
+        ..EMPTY
+    };
+    let Scratch {
+        points, immediate, ..
+    } = scratch;
+    points.clear();
+    immediate.clear();
+    points.push(center);
+    immediate.push(false);
+    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    let mut far_neighbours = 0;
+    for offset in 1..=RING_HALF_WINDOW {
+        for c in [col + offset, col + geometry.cols - offset] {
+            let n = row * geometry.cols + c % geometry.cols;
+            let Some(p) = returns.point(n) else { continue };
+            if (p.norm() - range).abs() <= 0.1 * range + 0.3 {
+                points.push(p);
+                immediate.push(offset == 1);
+            } else if offset == 1 {
+                far_neighbours += 1;
+            }
+        }
+    }
+    let Some((tangent, centroid)) = fit_line(points) else {
+        return CellSurface {
+            edge: far_neighbours > 0,
+            ..raw
+        };
+    };
+    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
+    let off_line = |p: &Vector3<f64>| {
+        let d = p - centroid;
+        (d - tangent * d.dot(&tangent)).norm() > tolerance
+    };
+    let immediate_off = points
+        .iter()
+        .zip(immediate.iter())
+        .filter(|(p, near)| **near && off_line(p))
+        .count();
+    let edge = off_line(&center) || far_neighbours + immediate_off > 0;
+    let support = points.iter().filter(|p| !off_line(p)).count();
+    let up = Vector3::z();
+    let level = tangent.z.abs() < LEVEL_TANGENT_Z;
+    let on_ground = (center.z - params.ground_z_m).abs() < 0.25 + 0.02 * range;
+    let normal = if level && on_ground {
+        (up - tangent * tangent.dot(&up)).normalize()
+    } else {
+        let across = tangent.cross(&up);
+        if across.norm() > 0.1 {
+            across.normalize()
+        } else {
+            // A vertical line: the surface faces the sensor horizontally.
+            Vector3::new(direction.x, direction.y, 0.0).normalize()
+        }
+    };
+    let facing = normal.dot(&direction);
+    let normal = if facing > 0.0 { -normal } else { normal };
+    let incidence_cos = facing.abs();
+    let denoised = if incidence_cos >= 0.1 {
+        centroid.dot(&normal) / direction.dot(&normal)
+    } else {
+        range
+    };
+    let range_m = if (denoised - range).abs() <= tolerance && denoised > 0.0 {
+        denoised
+    } else {
+        range
+    };
+    let d = center - centroid;
+    CellSurface {
+        residual_m: (d - tangent * d.dot(&tangent)).norm() as f32,
+        range_m: range_m as f32,
+        direction: as_f32(&direction),
+        normal: as_f32(&normal),
+        incidence_cos: incidence_cos as f32,
+        support: support.min(255) as u8,
+        edge,
+    }
+}
+
+/// Columns on each side of a sparse sensor's cell in its ring's line fit.
+const RING_HALF_WINDOW: usize = 3;
+/// A ring's line is level when its direction rises less than this (sine).
+const LEVEL_TANGENT_Z: f64 = 0.3;
+
+/// Least-squares line: unit direction and centroid; None for fewer than 3
+/// points or no spread.
+fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let centroid = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    let mut covariance = Matrix3::zeros();
+    for p in points {
+        let d = p - centroid;
+        covariance += d * d.transpose();
+    }
+    let (_, _, largest) = symmetric_eigenvalues(&covariance)?;
+    if !(largest.is_finite() && largest > 0.0) {
+        return None;
+    }
+    let direction = null_vector(&(covariance - Matrix3::identity() * largest))?;
+    Some((direction, centroid))
 }
 
 /// Neighbours on another surface that make a cell an occlusion edge.

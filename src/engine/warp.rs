@@ -90,10 +90,17 @@ pub fn render(
         }
     }
     let proxy = fill_dropouts(source, geometry, &mut vertices);
-    let candidates: Vec<Vec<Candidate>> = (0..geometry.rows.saturating_sub(1))
-        .into_par_iter()
-        .map(|row| rasterize_row(source, target, geometry, &vertices, &proxy, row))
-        .collect();
+    let candidates: Vec<Vec<Candidate>> = if geometry.sparse_rows() {
+        (0..geometry.rows)
+            .into_par_iter()
+            .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy, row))
+            .collect()
+    } else {
+        (0..geometry.rows.saturating_sub(1))
+            .into_par_iter()
+            .map(|row| rasterize_row(source, target, geometry, &vertices, &proxy, row))
+            .collect()
+    };
     let mut range_m = vec![f32::NAN; cells];
     let mut source_time_ns = vec![0; cells];
     let mut normal = vec![[0.0; 3]; cells];
@@ -300,6 +307,83 @@ fn rasterize_row(
                 .iter()
                 .any(|&v| source.surfaces.edge[proxy[v] as usize]);
             rasterize_triangle(target, geometry, [vi, vj, vk], edge, &mut out);
+        }
+    }
+    out
+}
+
+/// A sparse sensor's ring rendered into the same ring of the target: each
+/// segment between neighbouring returns of one surface, moved, covers the
+/// target rays of that laser between its ends; the range is each ray
+/// against the plane through the segment with the returns' fitted normals
+/// (beams 11 degrees apart share no surface to mesh across).
+fn rasterize_ring(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    vertices: &[Option<Vertex>],
+    proxy: &[u32],
+    row: usize,
+) -> Vec<Candidate> {
+    let cols = geometry.cols;
+    let mut out = Vec::new();
+    for col in 0..cols {
+        let (a, b) = (row * cols + col, row * cols + (col + 1) % cols);
+        let (Some(va), Some(vb)) = (vertices[a], vertices[b]) else {
+            continue;
+        };
+        let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);
+        if pa != pb && !same_surface(source, pa, pb) {
+            continue;
+        }
+        let edge = source.surfaces.edge[pa] || source.surfaces.edge[pb];
+        let unwrap = |c: f64, near: f64| {
+            if c - near > cols as f64 / 2.0 {
+                c - cols as f64
+            } else if near - c > cols as f64 / 2.0 {
+                c + cols as f64
+            } else {
+                c
+            }
+        };
+        let (ca, cb) = (va.col, unwrap(vb.col, va.col));
+        if (cb - ca).abs() < 1e-9 || (cb - ca).abs() > MAX_SPAN_CELLS {
+            continue;
+        }
+        for col_unwrapped in (ca.min(cb).floor() as i64)..=(ca.max(cb).ceil() as i64) {
+            let cell = row * cols + col_unwrapped.rem_euclid(cols as i64) as usize;
+            if !target.surfaces.range_m[cell].is_finite() {
+                continue;
+            }
+            let tc = unwrap(f64::from(target.coords[cell].1), ca);
+            let w = (tc - ca) / (cb - ca);
+            if !(-1e-9..=1.0 + 1e-9).contains(&w) {
+                continue;
+            }
+            let normal = va.normal * (1.0 - w) + vb.normal * w;
+            if normal.norm_squared() < 0.25 {
+                continue;
+            }
+            let normal = normal.normalize();
+            let point = va.position.coords * (1.0 - w) + vb.position.coords * w;
+            let d = target.surfaces.direction[cell];
+            let e = Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
+            let along = normal.dot(&e);
+            if along.abs() < 1e-3 {
+                continue;
+            }
+            let range = normal.dot(&point) / along;
+            if !(range > 0.0 && range.is_finite()) {
+                continue;
+            }
+            out.push(Candidate {
+                cell: cell as u32,
+                range_m: range as f32,
+                time_ns: (va.time_ns as f64 * (1.0 - w) + vb.time_ns as f64 * w).round()
+                    as StampNs,
+                normal: [normal.x as f32, normal.y as f32, normal.z as f32],
+                edge,
+            });
         }
     }
     out
