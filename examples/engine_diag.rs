@@ -59,7 +59,15 @@ fn prepared(scan: &Scan) -> Scan {
             scan.time_offset_s = Some(
                 scan.points_m
                     .iter()
-                    .map(|p| (looming::kitti::velodyne::sweep_fraction(p[0], p[1]) * 0.1) as f32)
+                    .map(|p| {
+                        let f = looming::kitti::velodyne::sweep_fraction(p[0], p[1]);
+                        let f = if std::env::var("CW").is_ok() {
+                            1.0 - f
+                        } else {
+                            f
+                        };
+                        (f * 0.1) as f32
+                    })
                     .collect(),
             );
         }
@@ -77,6 +85,8 @@ struct Totals {
     ground_fused: Vec<f32>,
     ground_lidar_left: Vec<f32>,
     ground_lidar_right: Vec<f32>,
+    ground_signed: [Vec<f32>; 3],
+    ground_rows: Vec<(f64, f64, usize)>,
     static_d: Vec<f32>,
     ms: f64,
     rows: usize,
@@ -115,6 +125,27 @@ impl Totals {
                 heights.push(p[2]);
             }
         }
+        if std::env::var("DIAG_NORMALS").is_ok() {
+            let mut tilts: Vec<f32> = (0..r.geometry.cells())
+                .filter(|&c| r.mask[c] & mask::EMPTY == 0 && r.normal[c][2] > 0.7)
+                .filter(|&c| scan.points_m[r.image.point[c] as usize][2] < -1.4)
+                .map(|c| r.normal[c][2].clamp(-1.0, 1.0).acos().to_degrees())
+                .collect();
+            tilts.sort_by(f32::total_cmp);
+            let q = |f: f64| {
+                tilts
+                    .get((f * tilts.len() as f64) as usize)
+                    .copied()
+                    .unwrap_or(f32::NAN)
+            };
+            println!(
+                "  ground normal tilt deg p50 {:.1} p75 {:.1} p90 {:.1} of {}",
+                q(0.5),
+                q(0.75),
+                q(0.9),
+                tilts.len()
+            );
+        }
         heights.sort_by(f32::total_cmp);
         let ground_z = heights.get(heights.len() / 2).copied().unwrap_or(f32::NAN);
         let mut pair_ground = Vec::new();
@@ -126,6 +157,19 @@ impl Totals {
             let range = (p[0] * p[0] + p[1] * p[1]).sqrt();
             if r.normal[cell][2] > 0.96 && (p[2] - ground_z).abs() < 0.2 + 0.01 * range {
                 pair_ground.push(r.fused[cell].abs());
+                self.ground_signed[0].push(r.l_lidar[cell]);
+                self.ground_signed[1].push(r.l_ray_ego[cell]);
+                self.ground_signed[2].push(r.fused[cell]);
+                let row = cell / r.geometry.cols;
+                if self.ground_rows.len() < r.geometry.rows {
+                    self.ground_rows.resize(r.geometry.rows, (0.0, 0.0, 0));
+                }
+                if r.l_ray_ego[cell].is_finite() {
+                    let g = &mut self.ground_rows[row];
+                    g.0 += f64::from(r.l_lidar[cell]);
+                    g.1 += f64::from(r.l_ray_ego[cell]);
+                    g.2 += 1;
+                }
                 self.ground_fused.push(r.fused[cell].abs());
                 if p[1] > 0.0 {
                     self.ground_lidar_left.push(r.l_lidar[cell]);
@@ -227,6 +271,39 @@ impl Totals {
     }
 
     fn print(&mut self) {
+        if std::env::var("DIAG_GROUND_ROWS").is_ok() {
+            for (row, g) in self.ground_rows.iter().enumerate() {
+                if g.2 > 100 {
+                    println!(
+                        "ground row {row:2}: mean L_lidar {:+.4} L_ray_ego {:+.4} over {}",
+                        g.0 / g.2 as f64,
+                        g.1 / g.2 as f64,
+                        g.2
+                    );
+                }
+            }
+        }
+        for (name, values) in ["l_lidar", "l_ray_ego", "fused"]
+            .iter()
+            .zip(self.ground_signed.iter_mut())
+        {
+            values.retain(|v| v.is_finite());
+            values.sort_by(f32::total_cmp);
+            let q = |f: f64| {
+                values
+                    .get((f * values.len() as f64) as usize)
+                    .copied()
+                    .unwrap_or(f32::NAN)
+            };
+            println!(
+                "ground {name:10} p10 {:+.4} p25 {:+.4} p50 {:+.4} p75 {:+.4} p90 {:+.4}",
+                q(0.1),
+                q(0.25),
+                q(0.5),
+                q(0.75),
+                q(0.9)
+            );
+        }
         let names = [
             "empty",
             "no_previous",

@@ -668,31 +668,22 @@ fn raw_cell(
     // covering triangle tilted away from the current plane straddles a crease
     // (road meeting a wall) or an occlusion, where the difference means nothing.
     let current_normal = current.normal[cell];
-    let creased = |normal: &[f32; 3]| {
-        let known = |n: &[f32; 3]| n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.5;
-        known(normal)
-            && known(&current_normal)
-            && (normal[0] * current_normal[0]
-                + normal[1] * current_normal[1]
-                + normal[2] * current_normal[2])
-                .abs()
-                < CREASE_COS
-    };
+    let creased = |normal: &[f32; 3]| apart(normal, &current_normal);
     // Where the ego-moved previous surface meets the current return within
     // the noise, the two are one static surface whatever their fitted
     // normals say (on a real sensor a normal from 15 returns can be tens of
     // degrees off at grazing incidence or where a window holds two lasers'
-    // biases): no crease there.
-    let coincident = moved.is_some_and(|m| {
+    // biases); the rotated render is then checked against the moved one,
+    // two renders of the same previous scan (at a road meeting a wall the
+    // rotated ray may still meet the wall).
+    let coincident = moved.filter(|m| {
         let predicted = f64::from(m.range_m[cell]);
         let incidence = f64::from(current.incidence_cos[cell]).max(0.3);
         (predicted - range_now).abs() * incidence <= 3.0 * current.noise_m(cell)
     });
-    if (!coincident
-        && (creased(&rotated.normal[cell]) || moved.is_some_and(|m| creased(&m.normal[cell]))))
-        || rotated.edge[cell]
-        || moved.is_some_and(|m| m.edge[cell])
-    {
+    let creased_here = creased(&rotated.normal[cell])
+        || (coincident.is_none() && moved.is_some_and(|m| creased(&m.normal[cell])));
+    if creased_here || rotated.edge[cell] || moved.is_some_and(|m| m.edge[cell]) {
         flags |= mask::EDGE;
     }
     let range_before = f64::from(rotated.range_m[cell]);
@@ -784,6 +775,12 @@ fn to_instant(raw: Raw, motion: &PairMotion, source_time_ns: StampNs, time_ns: S
 
 /// Below this mean speed the ratio of speeds means nothing.
 const MIN_SPEED_FOR_INSTANT_MPS: f64 = 0.1;
+
+/// Two known normals more than the crease angle apart.
+fn apart(a: &[f32; 3], b: &[f32; 3]) -> bool {
+    let known = |n: &[f32; 3]| n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.5;
+    known(a) && known(b) && (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() < CREASE_COS
+}
 
 /// Cosine of the largest angle between the current surface and the previous
 /// surface rendered along the same ray (25 degrees).
@@ -880,4 +877,3 @@ fn point_threats(image: &RangeImage, threat: &[ThreatLevel]) -> Vec<ThreatLevel>
         })
         .collect()
 }
-

@@ -379,8 +379,7 @@ fn rasterize_ring(
             out.push(Candidate {
                 cell: cell as u32,
                 range_m: range as f32,
-                time_ns: (va.time_ns as f64 * (1.0 - w) + vb.time_ns as f64 * w).round()
-                    as StampNs,
+                time_ns: (va.time_ns as f64 * (1.0 - w) + vb.time_ns as f64 * w).round() as StampNs,
                 normal: [normal.x as f32, normal.y as f32, normal.z as f32],
                 edge,
             });
