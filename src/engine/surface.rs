@@ -323,28 +323,16 @@ fn fit_window(
     };
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
     let Scratch {
-        points,
-        on_plane,
-        immediate,
+        points, on_plane, ..
     } = scratch;
     points.clear();
-    immediate.clear();
     points.push(center);
-    immediate.push(false);
-    // Another surface next to the cell, counted among its 8 neighbours only:
-    // a point further out in the window is left out of the fit, but marks no
-    // edge here (at 2048 columns that would widen every edge band to 5 cells).
     let mut far_neighbours = 0;
-    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
     for n in geometry.neighbours(cell, half_rows, half_cols) {
-        let (n_row, n_col) = (n / geometry.cols, n % geometry.cols);
-        let col_gap = n_col.abs_diff(col).min(geometry.cols - n_col.abs_diff(col));
-        let is_immediate = n_row.abs_diff(row) <= 1 && col_gap <= 1;
         if let Some(p) = returns.point(n) {
             if (p.norm() - range).abs() <= 0.3 * range + 0.5 {
                 points.push(p);
-                immediate.push(is_immediate);
-            } else if is_immediate {
+            } else {
                 far_neighbours += 1;
             }
         }
@@ -368,15 +356,12 @@ fn fit_window(
             .filter(|p| (p - centroid).dot(&normal).abs() <= tolerance),
     );
     // An edge: the return itself is off the plane of its window (a mixed
-    // pixel, a speck, a thin object), or at least two of its neighbours are
-    // (a lone speck next to it is not another surface).
+    // pixel, a speck, a thin object), or at least two returns of the window
+    // are (a lone speck or dropout echo beside it is not another surface; on
+    // real sensors one in a few hundred returns is one).
     let off_plane = |p: &Vector3<f64>| (p - centroid).dot(&normal).abs() > tolerance;
-    let immediate_off = points
-        .iter()
-        .zip(immediate.iter())
-        .filter(|(p, near)| **near && off_plane(p))
-        .count();
-    let edge = off_plane(&center) || far_neighbours + immediate_off >= MIN_EDGE_NEIGHBOURS;
+    let edge = off_plane(&center)
+        || far_neighbours + points.iter().filter(|p| off_plane(p)).count() >= MIN_EDGE_NEIGHBOURS;
     let (normal, centroid, support, spread) = if on_plane.len() == points.len() {
         (normal, centroid, points.len(), spread)
     } else {
@@ -563,7 +548,7 @@ fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
 }
 
 /// Neighbours on another surface that make a cell an occlusion edge.
-const MIN_EDGE_NEIGHBOURS: usize = 1;
+const MIN_EDGE_NEIGHBOURS: usize = 2;
 
 /// Least-squares plane: unit normal and centroid; None for fewer than 4 points
 /// or points along a line.
