@@ -355,13 +355,13 @@ fn fit_window(
             .copied()
             .filter(|p| (p - centroid).dot(&normal).abs() <= tolerance),
     );
-    // An edge: the return itself is off the plane of its window (a mixed
-    // pixel, a speck, a thin object), or at least two returns of the window
-    // are (a lone speck or dropout echo beside it is not another surface; on
-    // real sensors one in a few hundred returns is one).
-    let off_plane = |p: &Vector3<f64>| (p - centroid).dot(&normal).abs() > tolerance;
-    let edge = off_plane(&center)
-        || far_neighbours + points.iter().filter(|p| off_plane(p)).count() >= MIN_EDGE_NEIGHBOURS;
+    // An edge: a return of the window off the plane. (Letting one stray
+    // return pass, as real noise has heavy tails, kept a third more of the
+    // Hesai Pandar64's scan but cost 12 % of the fused accuracy on the
+    // synthetic `follow` at 64 x 2048, and the share of strays does not tell
+    // the two apart: 1.5-1.9 % on the real sensors, 3 % on the synthetic one
+    // at its creases.)
+    let edge = far_neighbours > 0 || on_plane.len() < points.len();
     let (normal, centroid, support, spread) = if on_plane.len() == points.len() {
         (normal, centroid, points.len(), spread)
     } else {
@@ -546,9 +546,6 @@ fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
     let direction = null_vector(&(covariance - Matrix3::identity() * largest))?;
     Some((direction, centroid))
 }
-
-/// Neighbours on another surface that make a cell an occlusion edge.
-const MIN_EDGE_NEIGHBOURS: usize = 2;
 
 /// Least-squares plane: unit normal and centroid; None for fewer than 4 points
 /// or points along a line.

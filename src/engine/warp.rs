@@ -424,15 +424,11 @@ fn rasterize_triangle(
     }
     let normal = (v[1].position - v[0].position).cross(&(v[2].position - v[0].position));
     let plane_offset = normal.dot(&v[0].position.coords);
-    // The surface's orientation from the vertices' fitted planes, not from
-    // the triangle: over a few centimetres between neighbouring lasers, per-
-    // laser range biases tilt a triangle by tens of degrees.
-    let fitted = v[0].normal + v[1].normal + v[2].normal;
-    let unit = if fitted.norm_squared() > 0.5 {
-        fitted.normalize()
-    } else {
-        normal / normal.norm().max(1e-300)
-    };
+    // The triangle's own orientation. (The mean of the vertices' fitted
+    // normals is steadier on a real sensor, 1.5 % more trusted returns on
+    // the HDL-64E, but misses creases the triangle sees: fused RMSE +23 %
+    // on the synthetic `crossing` at 64 x 2048.)
+    let unit = normal / normal.norm().max(1e-300);
     let row_lo = (r_min.floor().max(0.0)) as usize;
     let row_hi = (r_max.ceil() as usize).min(geometry.rows - 1);
     for row in row_lo..=row_hi {
