@@ -19,6 +19,7 @@
 
 pub mod beams;
 pub mod grid;
+pub mod layout;
 mod surface;
 pub mod threat;
 pub mod trajectory;
