@@ -35,8 +35,37 @@ fn agreement(candidate: &[u16], reference: &[u16]) -> f64 {
     best.values().sum::<usize>() as f64 / reference.len() as f64
 }
 
+/// The KITTI importer's ring rule before `engine::layout` (lists start
+/// straight ahead, counter-clockwise), for comparison.
+fn old_derive_rings(points: &[[f32; 3]]) -> Vec<u16> {
+    let mut rings = Vec::with_capacity(points.len());
+    let (mut ring, mut previous, mut middle) = (0u16, None::<f64>, false);
+    for p in points {
+        let t = (f64::from(p[1]).atan2(f64::from(p[0])) / std::f64::consts::TAU).rem_euclid(1.0);
+        if let Some(prev) = previous
+            && prev - t > 0.5
+            && middle
+        {
+            ring += 1;
+            middle = false;
+        }
+        middle |= (0.25..=0.75).contains(&t);
+        previous = Some(t);
+        rings.push(ring);
+    }
+    rings
+}
+
 fn report(scan: &Scan) {
     let rings = scan.ring.as_deref().unwrap_or(&[]);
+    if matches!(scan.layout.rings, layout::RingSource::LaserOrder { .. }) {
+        let old = old_derive_rings(&scan.points_m);
+        let same = old.iter().zip(rings).filter(|(a, b)| a == b).count();
+        println!(
+            "laser order vs the importer's former rule: {:.3} % of points on the same ring",
+            100.0 * same as f64 / rings.len() as f64
+        );
+    }
     let (lo, med, hi) = if rings.is_empty() { (0, 0, 0) } else { per_ring(rings) };
     let elevation = layout::elevation_rings(&scan.points_m);
     let elev = match (&elevation, rings.is_empty()) {

@@ -486,8 +486,8 @@ const AZIMUTH_CUT_TOLERANCE_TURN: f64 = 1.0 / 360.0;
 /// half a turn, the azimuth runs one way on 90 % of the steps, and no ring
 /// is a sliver (fewer than 1/20 of the mean points).
 ///
-/// The cut (where the lists start) is the azimuth that leaves the least
-/// excess turn in the lists ([`list_cut`]).
+/// The cut (where the lists start) is where the elevation hands over from
+/// one laser to the next ([`list_cut`]).
 ///
 /// The sweep: the direction above; the seam where the lists start, unless
 /// most lists start right at the cut (within 1 deg), which a time cut does
@@ -532,7 +532,7 @@ pub fn laser_order(
             .collect()
     };
     let valid_turns: Vec<f64> = valid.iter().map(|&(_, t)| t).collect();
-    let cut = list_cut(&valid_turns, sign, *counts.end());
+    let cut = list_cut(&valid_turns, &elevations, sign, *counts.end())?;
     let mut starts = split_turns(&along(cut), *counts.end())?;
     // Lists cut by azimuth start right at the cut (within 1 deg), apart from
     // lasers that saw nothing there (sky); time-cut lists at their lasers'
@@ -623,60 +623,62 @@ fn split_turns(u: &[f64], max_rings: usize) -> Option<Vec<usize>> {
     Some(starts)
 }
 
-/// Turns beyond one that the lists cover when cut at `reference` (turns),
-/// looking at every `stride`-th valid point: 0 when the cut separates every
-/// laser's list exactly, more for each point given to a neighbour.
-fn excess_turns(turns: &[f64], sign: f64, reference: f64, stride: usize, max_rings: usize) -> f64 {
-    let u: Vec<f64> = turns
-        .iter()
-        .step_by(stride)
-        .map(|&t| (sign * (t - reference)).rem_euclid(1.0))
-        .collect();
-    let Some(starts) = split_turns(&u, max_rings) else {
-        return f64::INFINITY;
-    };
-    let mut excess = 0.0;
-    for (k, &a) in starts.iter().enumerate() {
-        let b = starts.get(k + 1).copied().unwrap_or(u.len());
-        // Positive steps only: the segment's turn, wraps included.
-        let turned: f64 = u[a..b]
-            .windows(2)
-            .map(|w| wrap_turn(w[1] - w[0]).max(0.0))
-            .sum();
-        excess += (turned - 1.0).max(0.0);
+/// The azimuth (turns) where the lists are cut. A first cut at the first
+/// point's azimuth splits the lists roughly. Near each rough boundary
+/// (within 0.1 turn) a cut at `c` hands over between the two consecutive
+/// points whose azimuths straddle `c`; at the true cut those are two lasers,
+/// so the elevation changes there by a beam spacing, elsewhere by little.
+/// The cut is the `c` (on a 0.02 deg grid) with the largest median
+/// elevation change over all boundaries (an edge in the scene near one
+/// boundary does not move it).
+fn list_cut(turns: &[f64], elevations: &[f64], sign: f64, max_rings: usize) -> Option<f64> {
+    const WINDOW_TURN: f64 = 0.1;
+    const GRID_TURN: f64 = 0.02 / 360.0;
+    let first = *turns.first()?;
+    let u: Vec<f64> = turns.iter().map(|&t| (sign * (t - first)).rem_euclid(1.0)).collect();
+    let starts = split_turns(&u, max_rings)?;
+    if starts.len() < 2 {
+        return Some(first.rem_euclid(1.0));
     }
-    excess
-}
-
-/// The azimuth (turns) where the lists are cut: the reference that leaves
-/// the least excess turn in the segments, on a 1 deg grid over a subsample,
-/// then on a 0.02 deg grid within 1 deg of it over all points (the middle of
-/// the best stretch).
-fn list_cut(turns: &[f64], sign: f64, max_rings: usize) -> f64 {
-    let stride = (turns.len() / 20_000).max(1);
-    let best_of = |candidates: Vec<f64>, stride: usize| -> f64 {
-        let scored: Vec<(f64, f64)> = candidates
-            .into_iter()
-            .map(|r| (r, excess_turns(turns, sign, r, stride, max_rings)))
-            .collect();
-        let least = scored.iter().map(|s| s.1).fold(f64::INFINITY, f64::min);
-        let best: Vec<f64> = scored
-            .iter()
-            .filter(|s| s.1 <= least + 1e-9)
-            .map(|s| s.0)
-            .collect();
-        // The middle of the first run of best candidates.
-        let mut run = 1;
-        while run < best.len() && (best[run] - best[run - 1]) < 0.06 / 360.0 {
-            run += 1;
+    let near = |i: usize| u[i] <= WINDOW_TURN || u[i] >= 1.0 - WINDOW_TURN;
+    // Per boundary: (offset of point i from `first`, |elevation change| from
+    // i - 1 to i), in list order (offsets increasing).
+    let mut boundaries: Vec<Vec<(f64, f64)>> = Vec::with_capacity(starts.len() - 1);
+    for &b in starts.iter().skip(1) {
+        let (mut lo, mut hi) = (b, b);
+        while lo > 1 && near(lo - 1) {
+            lo -= 1;
         }
-        best.get(run / 2).copied().unwrap_or(0.0)
-    };
-    let coarse = best_of((0..360).map(|d| f64::from(d) / 360.0).collect(), stride);
-    best_of(
-        (-50..=50).map(|k| coarse + f64::from(k) * 0.02 / 360.0).collect(),
-        1,
-    )
+        while hi + 1 < turns.len() && near(hi + 1) {
+            hi += 1;
+        }
+        let steps: Vec<(f64, f64)> = (lo.max(1)..=hi)
+            .map(|i| (wrap_turn(u[i]), (elevations[i] - elevations[i - 1]).abs()))
+            .collect();
+        boundaries.push(steps);
+    }
+    let grid = (WINDOW_TURN / GRID_TURN) as i64;
+    let mut changes = Vec::with_capacity(boundaries.len());
+    let mut best = (f64::NEG_INFINITY, 0.0);
+    for g in -grid..=grid {
+        let c = g as f64 * GRID_TURN;
+        changes.clear();
+        for steps in &boundaries {
+            // The first step whose end lies at or after c.
+            let k = steps.partition_point(|&(offset, _)| offset < c);
+            if k > 0 && k < steps.len() {
+                changes.push(steps[k].1);
+            }
+        }
+        if changes.len() * 2 < boundaries.len() {
+            continue;
+        }
+        let score = median(&mut changes).unwrap_or(0.0);
+        if score > best.0 {
+            best = (score, c);
+        }
+    }
+    Some((first + sign * best.1).rem_euclid(1.0))
 }
 
 /// Lasers mounted at different azimuth offsets start their (time-ordered)
