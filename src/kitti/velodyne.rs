@@ -241,13 +241,14 @@ mod tests {
     fn jitter_across_forward_moves_a_boundary_by_a_point_at_most() {
         let mut points = three_lasers();
         // Laser 1's first point lies just right of forward, as if it had
-        // fired a hair early, and its last one a hair late: each goes to
-        // the neighbouring ring, nothing more.
+        // fired a hair early (at laser 0's height: it goes to ring 0), and
+        // its last one a hair late (at its own laser's height: the cut,
+        // where the elevation hands over between lasers, keeps it on ring 1).
         points[100] = [20.0, -0.01, 0.6, 0.5];
         points[199] = [20.0, 0.01, -2.0, 0.5];
         let rings = derive_rings(&points).expect("plausible");
         assert_eq!((rings[99], rings[100], rings[101]), (0, 0, 1));
-        assert_eq!((rings[198], rings[199], rings[200]), (1, 2, 2));
+        assert_eq!((rings[198], rings[199], rings[200]), (1, 1, 2));
     }
 
     #[test]
