@@ -66,7 +66,11 @@ fn report(scan: &Scan) {
             100.0 * same as f64 / rings.len() as f64
         );
     }
-    let (lo, med, hi) = if rings.is_empty() { (0, 0, 0) } else { per_ring(rings) };
+    let (lo, med, hi) = if rings.is_empty() {
+        (0, 0, 0)
+    } else {
+        per_ring(rings)
+    };
     let elevation = layout::elevation_rings(&scan.points_m);
     let elev = match (&elevation, rings.is_empty()) {
         (Some(e), false) => format!(
@@ -78,7 +82,9 @@ fn report(scan: &Scan) {
         (None, _) => "none".into(),
     };
     let firing = layout::firing_order(&scan.points_m, &scan.source_index)
-        .map_or("none".into(), |f| format!("period {} score {:.3}", f.period, f.score));
+        .map_or("none".into(), |f| {
+            format!("period {} score {:.3}", f.period, f.score)
+        });
     let laser = layout::laser_order(&scan.points_m, layout::RING_COUNTS)
         .map_or("none".into(), |l| format!("{} rings", l.ring_count));
     println!(
@@ -115,7 +121,10 @@ pub fn starts(scan: &Scan) {
     let mut out = Vec::new();
     for (p, &r) in scan.points_m.iter().zip(rings) {
         if r != last {
-            out.push(format!("{:.1}", f64::from(p[1]).atan2(f64::from(p[0])).to_degrees()));
+            out.push(format!(
+                "{:.1}",
+                f64::from(p[1]).atan2(f64::from(p[0])).to_degrees()
+            ));
             last = r;
         }
     }

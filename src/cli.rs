@@ -701,7 +701,11 @@ fn summary_text(s: &RunSummary) -> String {
                 .iter()
                 .map(|(kind, n)| format!("{kind} {n}"))
                 .collect();
-            let _ = writeln!(out, "                (varies by scan: {})", kinds.join(", "));
+            let _ = writeln!(
+                out,
+                "                (varies by scan: {})",
+                kinds.join(", ")
+            );
         }
         if s.pairing.ring_fields_dropped > 0 {
             let _ = writeln!(

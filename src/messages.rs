@@ -128,6 +128,9 @@ pub struct FrameTransform {
 }
 
 /// A decoded input message of one of the kinds the pipeline uses.
+// Scans are the common message (one per cloud, ~10 Hz) and move by value
+// once; boxing them would only add an allocation per scan.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Decoded {
     Scan(Scan),

@@ -1421,7 +1421,14 @@ fn ring_fields_under_their_common_names_and_integer_types() {
         ("z", datatype::FLOAT32),
         ("line", datatype::FLOAT32),
     ];
-    let scan = scan_of(&custom_cloud(0, &fields, &[vec![1.0, 2.0, 3.0, 2.5]], 1, 0, false));
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 2.5]],
+        1,
+        0,
+        false,
+    ));
     assert_eq!(scan.ring, None);
     // `ring` wins over the other names.
     let fields = [
@@ -1431,7 +1438,14 @@ fn ring_fields_under_their_common_names_and_integer_types() {
         ("channel", datatype::UINT16),
         ("ring", datatype::UINT8),
     ];
-    let scan = scan_of(&custom_cloud(0, &fields, &[vec![1.0, 2.0, 3.0, 9.0, 4.0]], 1, 0, false));
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 9.0, 4.0]],
+        1,
+        0,
+        false,
+    ));
     assert_eq!(scan.ring, Some(vec![4]));
 }
 
@@ -1463,7 +1477,14 @@ fn ring_values_that_are_not_rings_drop_the_field() {
         ("z", datatype::FLOAT32),
         ("ring", datatype::UINT16),
     ];
-    let scan = scan_of(&custom_cloud(0, &fields, &[vec![1.0, 2.0, 3.0, 1023.0]], 1, 0, false));
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 1023.0]],
+        1,
+        0,
+        false,
+    ));
     assert_eq!(scan.ring, Some(vec![1023]));
 }
 

@@ -25,14 +25,23 @@ fn layout_of(dir: &Path, name: &str) -> Option<serde_json::Value> {
     let run = looming_process(
         &input,
         &output,
-        &["--quiet", "--json-summary", summary.to_str().expect("UTF-8"), "--force"],
+        &[
+            "--quiet",
+            "--json-summary",
+            summary.to_str().expect("UTF-8"),
+            "--force",
+        ],
     );
     assert!(run.status.success(), "{name}: {}", stderr(&run));
     let text = std::fs::read_to_string(&summary).expect("summary");
     let json: serde_json::Value = serde_json::from_str(&text).expect("JSON summary");
     let pairing = &json["pairing"];
     let kinds = pairing["layout_kinds"].as_object().expect("layout kinds");
-    assert_eq!(kinds.len(), 1, "{name}: the layout varies by scan: {kinds:?}");
+    assert_eq!(
+        kinds.len(),
+        1,
+        "{name}: the layout varies by scan: {kinds:?}"
+    );
     Some(pairing["layout"].clone())
 }
 

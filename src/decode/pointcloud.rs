@@ -474,7 +474,7 @@ fn extract_with<X: XyzRead>(
         source_index,
         input_point_count: n as u32,
         skipped_invalid_points: skipped,
-        organized: (layout.rows > 1).then(|| (layout.rows as u32, layout.cols as u32)),
+        organized: (layout.rows > 1).then_some((layout.rows as u32, layout.cols as u32)),
         layout: scan_layout,
     }
 }

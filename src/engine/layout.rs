@@ -192,7 +192,11 @@ impl fmt::Display for ScanLayout {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}, times {}", self.rings_text(), self.times_text())?;
         if let Some(dropped) = &self.ring_field_dropped {
-            write!(f, "; ring field `{}` not used: {}", dropped.name, dropped.reason)?;
+            write!(
+                f,
+                "; ring field `{}` not used: {}",
+                dropped.name, dropped.reason
+            )?;
         }
         if let Some(note) = &self.note {
             write!(f, "; {note}")?;
@@ -205,10 +209,15 @@ impl fmt::Display for ScanLayout {
 fn bearing_word(azimuth_deg: f64) -> Option<&'static str> {
     let a = (azimuth_deg + 180.0).rem_euclid(360.0) - 180.0;
     let near = |centre: f64| ((a - centre + 180.0).rem_euclid(360.0) - 180.0).abs() <= 30.0;
-    [(0.0, "ahead"), (90.0, "left"), (180.0, "behind"), (-90.0, "right")]
-        .into_iter()
-        .find(|&(c, _)| near(c))
-        .map(|(_, w)| w)
+    [
+        (0.0, "ahead"),
+        (90.0, "left"),
+        (180.0, "behind"),
+        (-90.0, "right"),
+    ]
+    .into_iter()
+    .find(|&(c, _)| near(c))
+    .map(|(_, w)| w)
 }
 
 /// Scan period assumed when the stamps give none, seconds.
@@ -340,7 +349,8 @@ fn check_ring_field(scan: &mut Scan) {
 
 /// Number of distinct ring values.
 pub fn distinct_rings(rings: &[u16]) -> u32 {
-    let mut seen = vec![false; usize::from(MAX_RING.max(rings.iter().copied().max().unwrap_or(0))) + 1];
+    let mut seen =
+        vec![false; usize::from(MAX_RING.max(rings.iter().copied().max().unwrap_or(0))) + 1];
     let mut count = 0;
     for &r in rings {
         if !std::mem::replace(&mut seen[usize::from(r)], true) {
@@ -514,7 +524,10 @@ pub fn laser_order(
     if valid.len() < 2 * *counts.start() {
         return None;
     }
-    let mut steps: Vec<f64> = valid.windows(2).map(|w| wrap_turn(w[1].1 - w[0].1)).collect();
+    let mut steps: Vec<f64> = valid
+        .windows(2)
+        .map(|w| wrap_turn(w[1].1 - w[0].1))
+        .collect();
     let median_step = median(&mut steps)?;
     let direction = if median_step > 0.0 {
         Rotation::CounterClockwise
@@ -645,16 +658,14 @@ fn split_turns(u: &[f64], max_rings: usize) -> Option<Vec<usize>> {
 /// The cut is the `c` (on a 0.02 deg grid) with the largest median
 /// elevation change over all boundaries (an edge in the scene near one
 /// boundary does not move it). Returns the cut and that median change.
-fn list_cut(
-    turns: &[f64],
-    elevations: &[f64],
-    sign: f64,
-    max_rings: usize,
-) -> Option<(f64, f64)> {
+fn list_cut(turns: &[f64], elevations: &[f64], sign: f64, max_rings: usize) -> Option<(f64, f64)> {
     const WINDOW_TURN: f64 = 0.1;
     const GRID_TURN: f64 = 0.02 / 360.0;
     let first = *turns.first()?;
-    let u: Vec<f64> = turns.iter().map(|&t| (sign * (t - first)).rem_euclid(1.0)).collect();
+    let u: Vec<f64> = turns
+        .iter()
+        .map(|&t| (sign * (t - first)).rem_euclid(1.0))
+        .collect();
     let starts = split_turns(&u, max_rings)?;
     if starts.len() < 2 {
         return Some((first.rem_euclid(1.0), 0.0));
@@ -721,7 +732,10 @@ fn refine_boundaries(starts: &mut [usize], turns: &[f64], elevations: &[f64], si
     };
     for k in 1..starts.len() {
         let b = starts[k];
-        let (floor, ceil) = (starts[k - 1] + 1, starts.get(k + 1).map_or(turns.len(), |&n| n) - 1);
+        let (floor, ceil) = (
+            starts[k - 1] + 1,
+            starts.get(k + 1).map_or(turns.len(), |&n| n) - 1,
+        );
         let (mut lo, mut hi) = (b, b);
         while lo > floor && near_cut(lo - 1) {
             lo -= 1;
@@ -736,7 +750,11 @@ fn refine_boundaries(starts: &mut [usize], turns: &[f64], elevations: &[f64], si
             let jump = (local(i.saturating_sub(5).max(floor - 1), i)
                 - local(i, (i + 5).min(ceil + 1)))
             .abs();
-            let score = if step < -2.0 * typical { jump + 1.0 } else { jump };
+            let score = if step < -2.0 * typical {
+                jump + 1.0
+            } else {
+                jump
+            };
             if best.is_none_or(|(s, _)| score > s) {
                 best = Some((score, i));
             }
@@ -1118,7 +1136,8 @@ mod tests {
         for (k, laser) in lasers.iter().enumerate() {
             for i in 0..per_laser {
                 let fraction = (i as f64 + 0.5) / per_laser as f64;
-                let azimuth = seam_rad + laser.azimuth_offset_rad + direction.sign() * TAU * fraction;
+                let azimuth =
+                    seam_rad + laser.azimuth_offset_rad + direction.sign() * TAU * fraction;
                 // Some returns missing (sky, absorbing surfaces).
                 if rng.uniform(0.0, 1.0) < 0.05 {
                     continue;
@@ -1133,7 +1152,10 @@ mod tests {
 
     #[test]
     fn laser_order_both_directions() {
-        for (direction, seam_deg) in [(Rotation::CounterClockwise, 180.0), (Rotation::Clockwise, 40.0)] {
+        for (direction, seam_deg) in [
+            (Rotation::CounterClockwise, 180.0),
+            (Rotation::Clockwise, 40.0),
+        ] {
             let (mut scan, truth) = laser_order_scan(direction, f64::to_radians(seam_deg), 900);
             complete(&mut scan, 0.1);
             assert_eq!(scan.layout.rings, RingSource::LaserOrder { direction });
@@ -1145,16 +1167,27 @@ mod tests {
                 "{direction:?}: {same} of {} on their laser",
                 truth.len()
             );
-            let TimeSource::Azimuth { direction: d, seam_deg: s } = scan.layout.times else {
+            let TimeSource::Azimuth {
+                direction: d,
+                seam_deg: s,
+            } = scan.layout.times
+            else {
                 panic!("{:?}", scan.layout.times);
             };
             assert_eq!(d, direction);
-            assert!(wrap_turn((s - seam_deg) / 360.0).abs() < 3.0 / 360.0, "seam {s}");
+            assert!(
+                wrap_turn((s - seam_deg) / 360.0).abs() < 3.0 / 360.0,
+                "seam {s}"
+            );
             let times = scan.time_offset_s.as_deref().expect("times");
             assert!(times.iter().all(|&t| (0.0..0.1).contains(&t)));
             // Along a laser the time rises but for the few points fired
             // before the common seam.
-            let rises = times.windows(2).zip(rings.windows(2)).filter(|(t, r)| r[0] == r[1] && t[1] >= t[0]).count();
+            let rises = times
+                .windows(2)
+                .zip(rings.windows(2))
+                .filter(|(t, r)| r[0] == r[1] && t[1] >= t[0])
+                .count();
             assert!(rises as f64 > 0.97 * times.len() as f64, "{rises}");
         }
     }
@@ -1176,12 +1209,20 @@ mod tests {
         let mut scan = scan_of(points, (0..n).collect());
         complete(&mut scan, 0.1);
         assert_eq!(scan.layout.ring_count, 64);
-        let TimeSource::Azimuth { direction, seam_deg } = scan.layout.times else {
+        let TimeSource::Azimuth {
+            direction,
+            seam_deg,
+        } = scan.layout.times
+        else {
             panic!("{:?}", scan.layout.times);
         };
         assert_eq!(direction, Rotation::CounterClockwise);
         assert!((seam_deg - 180.0).abs() < 1.0, "{seam_deg}");
-        assert!(scan.layout.to_string().contains("behind"), "{}", scan.layout);
+        assert!(
+            scan.layout.to_string().contains("behind"),
+            "{}",
+            scan.layout
+        );
         let expected: Vec<u16> = (0..64).flat_map(|k| [k; 1000]).collect();
         assert_eq!(scan.ring.as_deref(), Some(expected.as_slice()));
     }
@@ -1213,7 +1254,11 @@ mod tests {
             complete(&mut scan, 0.1);
             assert_eq!(scan.layout.rings, RingSource::FiringOrder { period: 64 });
             assert_eq!(scan.ring.as_deref(), Some(truth.as_slice()));
-            let TimeSource::Azimuth { direction: d, seam_deg } = scan.layout.times else {
+            let TimeSource::Azimuth {
+                direction: d,
+                seam_deg,
+            } = scan.layout.times
+            else {
                 panic!("{:?}", scan.layout.times);
             };
             assert_eq!(d, direction);
@@ -1244,13 +1289,24 @@ mod tests {
         // nearest road returns still cross beams), but well above the
         // uncorrected table below.
         assert!(share > 0.9, "{share}");
-        assert!((56..=72).contains(&scan.layout.ring_count), "{}", scan.layout.ring_count);
+        assert!(
+            (56..=72).contains(&scan.layout.ring_count),
+            "{}",
+            scan.layout.ring_count
+        );
         // Without the correction (elevation alone) the near road smears
         // across beams: the correction must do better.
         let elevations: Vec<f32> = scan.points_m.iter().map(|p| elevation(p) as f32).collect();
         let table = BeamTable::infer(&elevations, 256).expect("table");
-        let plain: Vec<u16> = elevations.iter().map(|&e| table.row_of(f64::from(e)) as u16).collect();
-        assert!(share > agreement(&plain, &truth), "{share} vs {}", agreement(&plain, &truth));
+        let plain: Vec<u16> = elevations
+            .iter()
+            .map(|&e| table.row_of(f64::from(e)) as u16)
+            .collect();
+        assert!(
+            share > agreement(&plain, &truth),
+            "{share} vs {}",
+            agreement(&plain, &truth)
+        );
     }
 
     #[test]
@@ -1265,7 +1321,11 @@ mod tests {
                 }
                 let az = TAU * f64::from(c) / f64::from(cols);
                 let el = (10.0 - 3.0 * f64::from(r)).to_radians();
-                points.push([(10.0 * el.cos() * az.cos()) as f32, (10.0 * el.cos() * az.sin()) as f32, (10.0 * el.sin()) as f32]);
+                points.push([
+                    (10.0 * el.cos() * az.cos()) as f32,
+                    (10.0 * el.cos() * az.sin()) as f32,
+                    (10.0 * el.sin()) as f32,
+                ]);
                 index.push(r * cols + c);
             }
         }
@@ -1279,21 +1339,45 @@ mod tests {
             scan
         };
         let plain = organized(None);
-        assert_eq!(plain.layout.rings, RingSource::Organized { rows, cols, ring_field: None });
+        assert_eq!(
+            plain.layout.rings,
+            RingSource::Organized {
+                rows,
+                cols,
+                ring_field: None
+            }
+        );
         assert_eq!(plain.ring.as_deref(), Some(rows_of.as_slice()));
         assert_eq!(plain.layout.ring_count, 8);
-        assert_eq!(plain.layout.times, TimeSource::Stamp, "no time field, not in firing order");
-        assert!(plain.layout.to_string().starts_with("organized 8 x 100"), "{}", plain.layout);
+        assert_eq!(
+            plain.layout.times,
+            TimeSource::Stamp,
+            "no time field, not in firing order"
+        );
+        assert!(
+            plain.layout.to_string().starts_with("organized 8 x 100"),
+            "{}",
+            plain.layout
+        );
         // A field numbering the rows the other way agrees.
         let agreeing = organized(Some(rows_of.iter().map(|&r| 7 - r).collect()));
         assert_eq!(
             agreeing.layout.rings,
-            RingSource::Organized { rows, cols, ring_field: Some("channel".into()) }
+            RingSource::Organized {
+                rows,
+                cols,
+                ring_field: Some("channel".into())
+            }
         );
         // A field that does not follow the rows is used, and said.
         let other: Vec<u16> = (0..points.len()).map(|i| (i % 5) as u16).collect();
         let disagreeing = organized(Some(other.clone()));
-        assert_eq!(disagreeing.layout.rings, RingSource::Field { name: "channel".into() });
+        assert_eq!(
+            disagreeing.layout.rings,
+            RingSource::Field {
+                name: "channel".into()
+            }
+        );
         assert_eq!(disagreeing.ring, Some(other));
         assert!(disagreeing.layout.note.is_some());
     }
@@ -1304,7 +1388,12 @@ mod tests {
         scan.ring = Some(truth.clone());
         scan.layout = ScanLayout::from_fields(Some("laser_id"), None);
         complete(&mut scan, 0.1);
-        assert_eq!(scan.layout.rings, RingSource::Field { name: "laser_id".into() });
+        assert_eq!(
+            scan.layout.rings,
+            RingSource::Field {
+                name: "laser_id".into()
+            }
+        );
         assert_eq!(scan.ring, Some(truth));
         assert_eq!(scan.layout.ring_count, 64);
         // The field says nothing of the order: times stay the stamp's.
@@ -1336,7 +1425,13 @@ mod tests {
         let mut rng = SplitMix64(99);
         for n in [0usize, 1, 5, 300, 20_000] {
             let points: Vec<[f32; 3]> = (0..n)
-                .map(|_| [rng.uniform(-50.0, 50.0) as f32, rng.uniform(-50.0, 50.0) as f32, rng.uniform(-5.0, 5.0) as f32])
+                .map(|_| {
+                    [
+                        rng.uniform(-50.0, 50.0) as f32,
+                        rng.uniform(-50.0, 50.0) as f32,
+                        rng.uniform(-5.0, 5.0) as f32,
+                    ]
+                })
                 .collect();
             let mut scan = scan_of(points, (0..n as u32).collect());
             complete(&mut scan, f64::NAN);
@@ -1346,7 +1441,12 @@ mod tests {
         }
         // Non-finite and degenerate points.
         let mut odd = scan_of(
-            vec![[f32::NAN, 0.0, 0.0], [0.0, 0.0, 1.0], [f32::INFINITY, 1.0, 1.0], [0.0; 3]],
+            vec![
+                [f32::NAN, 0.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [f32::INFINITY, 1.0, 1.0],
+                [0.0; 3],
+            ],
             vec![0, 1, 2, 3],
         );
         complete(&mut odd, 0.1);
@@ -1356,9 +1456,14 @@ mod tests {
     #[test]
     fn descriptions() {
         let layout = ScanLayout {
-            rings: RingSource::LaserOrder { direction: Rotation::CounterClockwise },
+            rings: RingSource::LaserOrder {
+                direction: Rotation::CounterClockwise,
+            },
             ring_count: 64,
-            times: TimeSource::Azimuth { direction: Rotation::CounterClockwise, seam_deg: 180.0 },
+            times: TimeSource::Azimuth {
+                direction: Rotation::CounterClockwise,
+                seam_deg: 180.0,
+            },
             ring_field_dropped: None,
             note: None,
         };

@@ -22,7 +22,6 @@ const RECORD_BYTES: usize = 16;
 /// 128 lasers).
 const MAX_RINGS: usize = 128;
 
-
 /// All points of a scan, at most `max_points` of them (checked from the file
 /// length before anything is read or allocated). Non-finite values are kept
 /// as they are: the importer or decoder skips them, and dropping them here
