@@ -692,6 +692,29 @@ fn summary_text(s: &RunSummary) -> String {
         s.decoded.velocity,
         s.decoded.tf_messages
     );
+    if let Some(layout) = &s.pairing.layout {
+        let _ = writeln!(out, "  layout        {}: {layout}", s.topics.lidar.topic);
+        if s.pairing.layout_kinds.len() > 1 {
+            let kinds: Vec<String> = s
+                .pairing
+                .layout_kinds
+                .iter()
+                .map(|(kind, n)| format!("{kind} {n}"))
+                .collect();
+            let _ = writeln!(
+                out,
+                "                (varies by scan: {})",
+                kinds.join(", ")
+            );
+        }
+        if s.pairing.ring_fields_dropped > 0 {
+            let _ = writeln!(
+                out,
+                "                ring field dropped in {} scans (values not ring numbers)",
+                s.pairing.ring_fields_dropped
+            );
+        }
+    }
     let p = &s.pairing;
     let _ = writeln!(
         out,

@@ -4,6 +4,8 @@
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
+pub use crate::engine::layout::ScanLayout;
+
 /// Nanoseconds since the Unix epoch, from a message header stamp (ROS time).
 /// Signed so that differences never underflow.
 pub type StampNs = i64;
@@ -27,10 +29,14 @@ pub struct Scan {
     pub points_m: Vec<[f32; 3]>,
     /// `intensity` (or `reflectivity`) field, when present.
     pub intensity: Option<Vec<f32>>,
-    /// `ring` (beam index) field, when present.
+    /// Ring (beam index) of each kept point: the cloud's ring field when it
+    /// has one (`ring`, `channel`, `laser_id`, ...), else what
+    /// [`crate::engine::layout::complete`] recovered; `layout.rings` says which.
     pub ring: Option<Vec<u16>>,
     /// Per-point time relative to `stamp_ns`, seconds (may be negative for clouds
-    /// stamped at the end of the sweep), when the cloud has a time field.
+    /// stamped at the end of the sweep): the cloud's time field, else what
+    /// [`crate::engine::layout::complete`] derived from the azimuth;
+    /// `layout.times` says which.
     pub time_offset_s: Option<Vec<f32>>,
     /// Index of each kept point in the input cloud (row-major).
     pub source_index: Vec<u32>,
@@ -38,6 +44,12 @@ pub struct Scan {
     pub input_point_count: u32,
     /// Points dropped because a coordinate was NaN / infinite or the range was zero.
     pub skipped_invalid_points: u32,
+    /// `(rows, cols)` of an organized cloud (`PointCloud2` with `height > 1`):
+    /// point `i` sits in row `source_index[i] / cols`.
+    pub organized: Option<(u32, u32)>,
+    /// Where `ring` and `time_offset_s` come from. The decoder names the
+    /// fields it read; [`crate::engine::layout::complete`] fills the rest.
+    pub layout: ScanLayout,
 }
 
 impl Scan {
@@ -116,6 +128,9 @@ pub struct FrameTransform {
 }
 
 /// A decoded input message of one of the kinds the pipeline uses.
+// Scans are the common message (one per cloud, ~10 Hz) and move by value
+// once; boxing them would only add an allocation per scan.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Decoded {
     Scan(Scan),

@@ -283,6 +283,8 @@ struct WriterCounts {
 }
 
 /// Items from the reader+decoder stage.
+// Decoded scans dominate (see `Decoded`); boxing would add an allocation each.
+#[allow(clippy::large_enum_variant)]
 enum FromReader {
     Record(InputRecord),
     Decoded { log_time_ns: u64, decoded: Decoded },

@@ -1383,3 +1383,128 @@ fn garbage_and_mutated_input_never_panics() {
         }
     }
 }
+
+#[test]
+fn ring_fields_under_their_common_names_and_integer_types() {
+    use looming::engine::layout::RingSource;
+    let integers = [
+        datatype::INT8,
+        datatype::UINT8,
+        datatype::INT16,
+        datatype::UINT16,
+        datatype::INT32,
+        datatype::UINT32,
+    ];
+    for name in ["ring", "channel", "laser_id", "line", "laser_number"] {
+        for dt in integers {
+            let fields = [
+                ("x", datatype::FLOAT32),
+                ("y", datatype::FLOAT32),
+                ("z", datatype::FLOAT32),
+                (name, dt),
+            ];
+            let values = vec![vec![1.0, 2.0, 3.0, 5.0], vec![4.0, 5.0, 6.0, 63.0]];
+            let scan = scan_of(&custom_cloud(0, &fields, &values, 1, 0, false));
+            let ctx = format!("{name} datatype {dt}");
+            assert_eq!(scan.ring, Some(vec![5, 63]), "{ctx}");
+            assert_eq!(
+                scan.layout.rings,
+                RingSource::Field { name: name.into() },
+                "{ctx}"
+            );
+        }
+    }
+    // A float is a ring only as `ring` (as before); `line` as a float is not.
+    let fields = [
+        ("x", datatype::FLOAT32),
+        ("y", datatype::FLOAT32),
+        ("z", datatype::FLOAT32),
+        ("line", datatype::FLOAT32),
+    ];
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 2.5]],
+        1,
+        0,
+        false,
+    ));
+    assert_eq!(scan.ring, None);
+    // `ring` wins over the other names.
+    let fields = [
+        ("x", datatype::FLOAT32),
+        ("y", datatype::FLOAT32),
+        ("z", datatype::FLOAT32),
+        ("channel", datatype::UINT16),
+        ("ring", datatype::UINT8),
+    ];
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 9.0, 4.0]],
+        1,
+        0,
+        false,
+    ));
+    assert_eq!(scan.ring, Some(vec![4]));
+}
+
+#[test]
+fn ring_values_that_are_not_rings_drop_the_field() {
+    for (dt, bad) in [
+        (datatype::INT16, -1.0),
+        (datatype::UINT32, 1024.0),
+        (datatype::UINT32, 4_000_000_000.0),
+        (datatype::FLOAT32, 2.5),
+    ] {
+        let fields = [
+            ("x", datatype::FLOAT32),
+            ("y", datatype::FLOAT32),
+            ("z", datatype::FLOAT32),
+            ("ring", dt),
+        ];
+        let values = vec![vec![1.0, 2.0, 3.0, 1.0], vec![4.0, 5.0, 6.0, bad]];
+        let scan = scan_of(&custom_cloud(0, &fields, &values, 1, 0, false));
+        let ctx = format!("datatype {dt} value {bad}");
+        assert_eq!(scan.ring, None, "{ctx}");
+        let dropped = scan.layout.ring_field_dropped.expect(&ctx);
+        assert_eq!(dropped.name, "ring", "{ctx}");
+    }
+    // 1023 is still a ring.
+    let fields = [
+        ("x", datatype::FLOAT32),
+        ("y", datatype::FLOAT32),
+        ("z", datatype::FLOAT32),
+        ("ring", datatype::UINT16),
+    ];
+    let scan = scan_of(&custom_cloud(
+        0,
+        &fields,
+        &[vec![1.0, 2.0, 3.0, 1023.0]],
+        1,
+        0,
+        false,
+    ));
+    assert_eq!(scan.ring, Some(vec![1023]));
+}
+
+#[test]
+fn organized_shape_is_kept() {
+    let fields = [
+        ("x", datatype::FLOAT32),
+        ("y", datatype::FLOAT32),
+        ("z", datatype::FLOAT32),
+    ];
+    // 2 rows of 3, the middle of row 0 without a return.
+    let mut values: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 + 1.0, 0.0, 1.0]).collect();
+    values[1] = vec![f64::NAN, f64::NAN, f64::NAN];
+    let scan = scan_of(&custom_cloud(0, &fields, &values, 2, 4, false));
+    assert_eq!(scan.organized, Some((2, 3)));
+    assert_eq!(scan.source_index, vec![0, 2, 3, 4, 5]);
+    let mut completed = scan.clone();
+    looming::engine::layout::complete(&mut completed, 0.1);
+    assert_eq!(completed.ring, Some(vec![0, 0, 1, 1, 1]));
+    // One row is not organized.
+    let flat = scan_of(&custom_cloud(0, &fields, &values, 1, 0, false));
+    assert_eq!(flat.organized, None);
+}

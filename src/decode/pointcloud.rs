@@ -9,6 +9,7 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::DecodeLimits;
+use crate::engine::layout::{DroppedRingField, RingSource, ScanLayout};
 use crate::messages::{Scan, StampNs};
 use crate::ros::DecodeError;
 use crate::ros::msgs::{PointCloud2, datatype};
@@ -139,6 +140,15 @@ const TIME_FIELDS: [(&str, bool); 5] = [
     ("time_stamp", true),
 ];
 
+/// Ring (laser, beam) field names of common drivers, in priority order:
+/// Velodyne / Ouster / Hesai `ring`, RoboSense / Ouster-ROS2 `channel`,
+/// `laser_id` (Velodyne raw), `line` (Livox), `laser_number`.
+pub const RING_FIELDS: [&str; 5] = ["ring", "channel", "laser_id", "line", "laser_number"];
+
+/// A ring value above this is not a ring (the largest LiDARs have 128-256
+/// lasers): the field is then dropped as a whole.
+pub const MAX_RING_VALUE: f64 = 1023.0;
+
 /// Absolute float times above this are nanoseconds, not seconds (1e14 s is
 /// ~3 million years; 1e14 ns is ~28 hours after the epoch).
 const ABSOLUTE_NS_THRESHOLD: f64 = 1e14;
@@ -173,8 +183,10 @@ struct Readers {
     /// 2D clouds may omit `z`; it then reads as 0.
     z: Option<FieldReader>,
     intensity: Option<FieldReader>,
-    ring: Option<FieldReader>,
-    time: Option<(FieldReader, TimeConvention)>,
+    /// The ring field and its name.
+    ring: Option<(FieldReader, &'static str)>,
+    /// The time field, its convention and its name.
+    time: Option<(FieldReader, TimeConvention, &'static str)>,
 }
 
 fn find<'a, 'f>(fields: &'a [FieldDesc<'f>], name: &str) -> Option<&'a FieldDesc<'f>> {
@@ -223,8 +235,8 @@ fn resolve_readers(fields: &[FieldDesc<'_>], layout: &Layout<'_>) -> Result<Read
     };
     let time = TIME_FIELDS
         .iter()
-        .find_map(|&(n, absolute)| find(fields, n).map(|d| (d, absolute)))
-        .map(|(d, absolute)| -> Result<_, DecodeError> {
+        .find_map(|&(n, absolute)| find(fields, n).map(|d| (d, absolute, n)))
+        .map(|(d, absolute, name)| -> Result<_, DecodeError> {
             let reader = field_reader(d, ps, be)?;
             let convention = if absolute {
                 absolute_convention(&reader, layout)
@@ -233,15 +245,26 @@ fn resolve_readers(fields: &[FieldDesc<'_>], layout: &Layout<'_>) -> Result<Read
             } else {
                 TimeConvention::Relative { scale_s: 1e-9 }
             };
-            Ok((reader, convention))
+            Ok((reader, convention, name))
         })
+        .transpose()?;
+    // Any integer type under any of the names; a float only as `ring` (as
+    // before; its values must still be whole numbers).
+    let ring = RING_FIELDS
+        .iter()
+        .filter_map(|&n| find(fields, n).map(|d| (d, n)))
+        .find(|(d, n)| match d.scalar {
+            Ok(scalar) => !scalar.is_float() || *n == "ring",
+            Err(_) => false,
+        })
+        .map(|(d, name)| field_reader(d, ps, be).map(|r| (r, name)))
         .transpose()?;
     Ok(Readers {
         x: required("x")?,
         y: required("y")?,
         z: optional(&["z"])?,
         intensity: optional(&["intensity", "reflectivity"])?,
-        ring: optional(&["ring"])?,
+        ring,
         time,
     })
 }
@@ -386,8 +409,10 @@ fn extract_with<X: XyzRead>(
     let mut time_offset_s = readers.time.map(|_| Vec::with_capacity(n));
     let time_conv = readers
         .time
-        .map(|(_, conv)| TimeToOffset::new(conv, stamp_ns));
+        .map(|(_, conv, _)| TimeToOffset::new(conv, stamp_ns));
     let mut skipped: u32 = 0;
+    // A ring value that is negative, fractional or above MAX_RING_VALUE.
+    let mut bad_ring: Option<f64> = None;
 
     let row_bytes = layout.cols * layout.point_step;
     for r in 0..layout.rows {
@@ -408,11 +433,16 @@ fn extract_with<X: XyzRead>(
             if let (Some(v), Some(f)) = (&mut intensity, &readers.intensity) {
                 v.push(f.read(p) as f32);
             }
-            if let (Some(v), Some(f)) = (&mut ring, &readers.ring) {
-                // Saturating float-to-int cast: any integer type fits sensibly.
-                v.push(f.read(p) as u16);
+            if let (Some(v), Some((f, _))) = (&mut ring, &readers.ring) {
+                let value = f.read(p);
+                if (0.0..=MAX_RING_VALUE).contains(&value) && value.fract() == 0.0 {
+                    v.push(value as u16);
+                } else {
+                    bad_ring.get_or_insert(value);
+                    v.push(0);
+                }
             }
-            if let (Some(v), Some((f, _)), Some(conv)) =
+            if let (Some(v), Some((f, _, _)), Some(conv)) =
                 (&mut time_offset_s, &readers.time, &time_conv)
             {
                 v.push(conv.offset_s(f.read(p)));
@@ -420,6 +450,19 @@ fn extract_with<X: XyzRead>(
         }
     }
 
+    let mut scan_layout = ScanLayout::from_fields(
+        readers.ring.map(|(_, name)| name),
+        readers.time.map(|(_, _, name)| name),
+    );
+    if let (Some(value), Some((_, name))) = (bad_ring, readers.ring) {
+        // Not a ring: the field is dropped whole, never used to size anything.
+        ring = None;
+        scan_layout.rings = RingSource::None;
+        scan_layout.ring_field_dropped = Some(DroppedRingField {
+            name: name.to_owned(),
+            reason: format!("value {value} is not a ring number (0..={MAX_RING_VALUE})"),
+        });
+    }
     Scan {
         stamp_ns,
         frame_id,
@@ -431,6 +474,8 @@ fn extract_with<X: XyzRead>(
         source_index,
         input_point_count: n as u32,
         skipped_invalid_points: skipped,
+        organized: (layout.rows > 1).then_some((layout.rows as u32, layout.cols as u32)),
+        layout: scan_layout,
     }
 }
 
@@ -460,6 +505,8 @@ fn empty_scan(stamp_ns: StampNs, frame_id: String, sensor_pose: Isometry3<f64>) 
         source_index: Vec::new(),
         input_point_count: 0,
         skipped_invalid_points: 0,
+        organized: None,
+        layout: ScanLayout::default(),
     }
 }
 

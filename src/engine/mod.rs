@@ -20,6 +20,7 @@
 pub mod beams;
 pub mod egomotion;
 pub mod grid;
+pub mod layout;
 mod surface;
 pub mod threat;
 pub mod trajectory;

@@ -22,11 +22,6 @@ const RECORD_BYTES: usize = 16;
 /// 128 lasers).
 const MAX_RINGS: usize = 128;
 
-/// A ring with fewer than 1/20 of the mean points per ring is a spurious
-/// split (e.g. two azimuth jitters in a row), not a laser: real KITTI lasers
-/// hold 0.55x to 1.1x the mean.
-const MIN_RING_SHARE_DIVISOR: usize = 20;
-
 /// All points of a scan, at most `max_points` of them (checked from the file
 /// length before anything is read or allocated). Non-finite values are kept
 /// as they are: the importer or decoder skips them, and dropping them here
@@ -65,69 +60,17 @@ pub fn sweep_fraction(x: f32, y: f32) -> f64 {
     ((azimuth_rad + PI) / TAU).rem_euclid(1.0)
 }
 
-/// Ring (laser) number of every point, from the file order alone: each
-/// laser's points run counter-clockwise from straight ahead through one
-/// turn, so a new laser starts where the azimuth, measured
-/// counter-clockwise from forward in [0, 1) turn, falls back by more than
-/// half a turn. (In sweep-fraction terms a laser's list wraps behind the
-/// car, mid-list, and lasers change ahead, where the sweep fraction is
-/// continuous; hence this measure instead.) A fall-back only counts once
-/// the current ring has reached the middle of its turn, so that jitter of a
-/// point or two across straight ahead does not split a ring. Points without
-/// an azimuth (non-finite, or on the z axis, e.g. the origin) keep the
-/// current ring.
-///
-/// Rings are numbered in file order (top laser first on KITTI), not by
-/// elevation. `None` when the result is not plausibly a spinning LiDAR:
-/// fewer than 2 or more than 128 rings, or a ring holding fewer than 1/20
-/// of the mean valid points per ring.
+/// Ring (laser) number of every point, from the file order alone: the
+/// engine's laser-order detection (`engine::layout::laser_order`), which
+/// every log gets; rings are numbered in file order (top laser first on
+/// KITTI), not by elevation. Points without an azimuth (non-finite, or on
+/// the z axis) keep the current ring. `None` when the result is not
+/// plausibly a spinning LiDAR: fewer than 2 or more than 128 rings, a ring
+/// that does not turn, or a ring holding fewer than 1/20 of the mean valid
+/// points per ring.
 pub fn derive_rings(points: &[[f32; 4]]) -> Option<Vec<u16>> {
-    let mut rings = Vec::with_capacity(points.len());
-    let mut valid_per_ring = vec![0_usize];
-    let mut previous_turn: Option<f64> = None;
-    let mut reached_middle = false;
-    for point in points {
-        if let Some(turn) = turn_from_forward(point) {
-            if let Some(previous) = previous_turn
-                && previous - turn > 0.5
-                && reached_middle
-            {
-                if valid_per_ring.len() == MAX_RINGS {
-                    return None;
-                }
-                valid_per_ring.push(0);
-                reached_middle = false;
-            }
-            reached_middle |= (0.25..=0.75).contains(&turn);
-            previous_turn = Some(turn);
-            if let Some(count) = valid_per_ring.last_mut() {
-                *count += 1;
-            }
-        }
-        // At most MAX_RINGS - 1 (checked above), so it fits a u16.
-        rings.push((valid_per_ring.len() - 1) as u16);
-    }
-    plausible_rings(&valid_per_ring).then_some(rings)
-}
-
-/// Azimuth counter-clockwise from forward as a fraction of a turn, in
-/// [0, 1); `None` for a point without one.
-fn turn_from_forward(point: &[f32; 4]) -> Option<f64> {
-    let [x, y, z, _] = *point;
-    let has_azimuth = x.is_finite() && y.is_finite() && z.is_finite() && (x != 0.0 || y != 0.0);
-    has_azimuth.then(|| (f64::from(y).atan2(f64::from(x)) / TAU).rem_euclid(1.0))
-}
-
-/// See `derive_rings`: a ring count a spinning LiDAR can have, and no ring
-/// that is a sliver of the others.
-fn plausible_rings(valid_per_ring: &[usize]) -> bool {
-    let ring_count = valid_per_ring.len();
-    if !(2..=MAX_RINGS).contains(&ring_count) {
-        return false;
-    }
-    let mean = valid_per_ring.iter().sum::<usize>() / ring_count;
-    let fewest_allowed = (mean / MIN_RING_SHARE_DIVISOR).max(1);
-    valid_per_ring.iter().all(|&count| count >= fewest_allowed)
+    let xyz: Vec<[f32; 3]> = points.iter().map(|p| [p[0], p[1], p[2]]).collect();
+    crate::engine::layout::laser_order(&xyz, 2..=MAX_RINGS).map(|order| order.rings)
 }
 
 fn decode_record(record: &[u8; RECORD_BYTES]) -> [f32; 4] {
@@ -297,13 +240,14 @@ mod tests {
     fn jitter_across_forward_moves_a_boundary_by_a_point_at_most() {
         let mut points = three_lasers();
         // Laser 1's first point lies just right of forward, as if it had
-        // fired a hair early, and its last one a hair late: each goes to
-        // the neighbouring ring, nothing more.
+        // fired a hair early (at laser 0's height: it goes to ring 0), and
+        // its last one a hair late (at its own laser's height: the cut,
+        // where the elevation hands over between lasers, keeps it on ring 1).
         points[100] = [20.0, -0.01, 0.6, 0.5];
         points[199] = [20.0, 0.01, -2.0, 0.5];
         let rings = derive_rings(&points).expect("plausible");
         assert_eq!((rings[99], rings[100], rings[101]), (0, 0, 1));
-        assert_eq!((rings[198], rings[199], rings[200]), (1, 2, 2));
+        assert_eq!((rings[198], rings[199], rings[200]), (1, 1, 2));
     }
 
     #[test]
@@ -333,31 +277,6 @@ mod tests {
         assert_eq!(derive_rings(&invalid), None);
     }
 
-    #[test]
-    fn plausibility_rule() {
-        assert!(plausible_rings(&[100, 100]));
-        // Mean 67 points per ring, so at least 3 each.
-        assert!(!plausible_rings(&[100, 2, 100]));
-        assert!(plausible_rings(&[100, 3, 100]));
-        assert!(!plausible_rings(&[100, 100, 100, 2]));
-        assert!(!plausible_rings(&[100]));
-        assert!(!plausible_rings(&[1; 129]));
-        assert!(plausible_rings(&[1; 128]));
-        assert!(!plausible_rings(&[0, 0]));
-    }
-
-    #[test]
-    fn turn_from_forward_quarters() {
-        assert_eq!(turn_from_forward(&[1.0, 0.0, 0.0, 0.0]), Some(0.0));
-        assert_eq!(turn_from_forward(&[0.0, 1.0, 0.0, 0.0]), Some(0.25));
-        assert_eq!(turn_from_forward(&[0.0, -1.0, 0.0, 0.0]), Some(0.75));
-        assert_eq!(turn_from_forward(&[0.0, 0.0, 1.0, 0.0]), None);
-        assert_eq!(turn_from_forward(&[1.0, 0.0, f32::NAN, 0.0]), None);
-    }
-
-    /// Six real KITTI HDL-64E scans, kept beside the repository and never
-    /// copied into it (non-commercial licence). Run with `--ignored
-    /// --nocapture` to see the statistics.
     #[test]
     #[ignore]
     fn kitti_hdl64e_scans() {

@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use super::OwnChannelSpec;
+use crate::engine::layout::{RingSource, ScanLayout, TimeSource};
 use crate::messages::Scan;
 use crate::pairing::ScanPair;
 use crate::pairing::frames::ExtrinsicInfo;
@@ -39,6 +40,30 @@ pub struct ScanRecord {
     pub invalid_points: u64,
     pub per_point_time: bool,
     pub ring: bool,
+    pub layout: LayoutRecord,
+}
+
+/// Where a scan's rings and times came from (`engine::layout`).
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct LayoutRecord {
+    /// organized, field, laser_order, firing_order, elevation or none.
+    pub rings: String,
+    pub ring_count: u32,
+    /// field, azimuth or stamp.
+    pub times: String,
+    /// The layout in words, as in the run summary.
+    pub description: String,
+}
+
+impl LayoutRecord {
+    fn new(layout: &ScanLayout) -> Self {
+        Self {
+            rings: layout.rings.kind().to_owned(),
+            ring_count: layout.ring_count,
+            times: layout.times.kind().to_owned(),
+            description: layout.to_string(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
@@ -55,8 +80,16 @@ impl ScanRecord {
             frame_id: scan.frame_id.clone(),
             points: scan.points_m.len() as u64,
             invalid_points: u64::from(scan.skipped_invalid_points),
-            per_point_time: scan.time_offset_s.is_some(),
-            ring: scan.ring.is_some(),
+            per_point_time: matches!(scan.layout.times, TimeSource::Field { .. }),
+            ring: matches!(
+                scan.layout.rings,
+                RingSource::Field { .. }
+                    | RingSource::Organized {
+                        ring_field: Some(_),
+                        ..
+                    }
+            ),
+            layout: LayoutRecord::new(&scan.layout),
         }
     }
 }

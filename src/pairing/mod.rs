@@ -33,12 +33,18 @@ pub use frames::{
 };
 pub use motion::{AngularSource, MotionSample, PairMotion, TimeSeries};
 
+use crate::engine::layout::{self, ScanLayout};
 use crate::messages::{Decoded, FrameTransform, ImuSample, Scan, StampNs, VelocitySample};
 use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion, seconds_to_ns};
 
 /// Accepted dts kept for the running median that stands in for the nominal
 /// period when none is set: enough to ride out dropped scans, bounded.
 const MEDIAN_WINDOW_LEN: usize = 101;
+/// Stamp differences of consecutive scans kept for the period used to time
+/// points from their azimuth.
+const LAYOUT_PERIOD_WINDOW_LEN: usize = 11;
+/// Bounds of that period, seconds.
+const LAYOUT_PERIOD_RANGE_S: (f64, f64) = (0.02, 0.5);
 /// Before the first scan, motion samples this much older than the newest one
 /// (plus the hold) are dropped: a sweep-start stamp lies at most about one
 /// period before its log time, and logs can open with minutes of IMU data.
@@ -134,6 +140,14 @@ pub struct PairingStats {
     pub extrinsic_source: BTreeMap<String, String>,
     /// Nominal scan period in use (set, or running median of accepted dts).
     pub nominal_period_s: Option<f64>,
+    /// How the first scan's rings and times were obtained
+    /// (`engine::layout::complete`).
+    pub layout: Option<ScanLayout>,
+    /// Scans per layout kind, `"<rings kind> / <times kind>"` (e.g.
+    /// `laser_order / azimuth`): more than one entry when it varies.
+    pub layout_kinds: BTreeMap<String, u64>,
+    /// Scans whose ring field was dropped (values that are not ring numbers).
+    pub ring_fields_dropped: u64,
 }
 
 #[derive(Debug, Clone)]
@@ -277,6 +291,10 @@ pub struct ScanPairer {
     next_index: u64,
     warned: HashSet<String>,
     stats: PairingStats,
+    /// Stamp of the last scan pushed through `push_decoded`.
+    last_scan_stamp_ns: Option<StampNs>,
+    /// Recent positive stamp differences of consecutive scans, seconds.
+    recent_scan_dts_s: VecDeque<f64>,
 }
 
 impl ScanPairer {
@@ -294,6 +312,8 @@ impl ScanPairer {
             next_index: 0,
             warned: HashSet::new(),
             stats: PairingStats::default(),
+            last_scan_stamp_ns: None,
+            recent_scan_dts_s: VecDeque::with_capacity(LAYOUT_PERIOD_WINDOW_LEN),
         }
     }
 
@@ -359,7 +379,10 @@ impl ScanPairer {
     /// Feed any decoded message (the dispatch every caller would otherwise repeat).
     pub fn push_decoded(&mut self, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
         match decoded {
-            Decoded::Scan(scan) => self.push_scan(log_time_ns, Arc::new(scan)),
+            Decoded::Scan(mut scan) => {
+                self.complete_layout(&mut scan);
+                self.push_scan(log_time_ns, Arc::new(scan))
+            }
             Decoded::Imu(sample) => self.push_imu(log_time_ns, sample),
             Decoded::Velocity(sample) => self.push_velocity(log_time_ns, sample),
             Decoded::Transforms {
@@ -370,6 +393,46 @@ impl ScanPairer {
                 Vec::new()
             }
         }
+    }
+
+    /// Recovers the scan's rings and times (`engine::layout::complete`) with
+    /// the scan period from the stamps, and records the layout.
+    pub fn complete_layout(&mut self, scan: &mut Scan) {
+        let period_s = self.layout_period_s(scan.stamp_ns);
+        layout::complete(scan, period_s);
+        let kind = format!(
+            "{} / {}",
+            scan.layout.rings.kind(),
+            scan.layout.times.kind()
+        );
+        *self.stats.layout_kinds.entry(kind).or_default() += 1;
+        if scan.layout.ring_field_dropped.is_some() {
+            self.stats.ring_fields_dropped += 1;
+        }
+        if self.stats.layout.is_none() {
+            self.stats.layout = Some(scan.layout.clone());
+        }
+    }
+
+    /// The median of recent stamp differences (this scan's included), else
+    /// the nominal period, else `layout::DEFAULT_PERIOD_S`; clamped to
+    /// 0.02-0.5 s.
+    fn layout_period_s(&mut self, stamp_ns: StampNs) -> f64 {
+        if let Some(last) = self.last_scan_stamp_ns {
+            let dt_s = (stamp_ns - last) as f64 * 1e-9;
+            if dt_s > 0.0 {
+                if self.recent_scan_dts_s.len() == LAYOUT_PERIOD_WINDOW_LEN {
+                    self.recent_scan_dts_s.pop_front();
+                }
+                self.recent_scan_dts_s.push_back(dt_s);
+            }
+        }
+        self.last_scan_stamp_ns = Some(stamp_ns);
+        let (lo, hi) = LAYOUT_PERIOD_RANGE_S;
+        median(&self.recent_scan_dts_s)
+            .or(self.nominal_period_override_s)
+            .unwrap_or(layout::DEFAULT_PERIOD_S)
+            .clamp(lo, hi)
     }
 
     pub fn push_transforms(&mut self, transforms: &[FrameTransform], is_static: bool) {

@@ -23,6 +23,8 @@ fn scan_with(
         source_index: (0..point_count as u32).collect(),
         input_point_count: point_count as u32,
         skipped_invalid_points: 0,
+        organized: None,
+        layout: crate::messages::ScanLayout::default(),
     })
 }
 

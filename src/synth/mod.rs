@@ -163,6 +163,8 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::pa
         source_index: (0..scan.points.len() as u32).collect(),
         input_point_count: scan.points.len() as u32,
         skipped_invalid_points: 0,
+        organized: None,
+        layout: crate::messages::ScanLayout::from_fields(Some("ring"), Some("time")),
     };
     let (previous, current) = (world.scan(index, seed), world.scan(index + 1, seed));
     let (from_s, to_s) = (
