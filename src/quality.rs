@@ -171,8 +171,10 @@ impl AbsHistogram {
     }
 }
 
-/// The static ground of one half (left: y > 0, right: y < 0), trusted static
-/// cells only.
+/// One half of the ground (left: y > 0, right: y < 0), trusted cells only,
+/// those flagged moving included: the ground does not move, so a moving flag
+/// on it is itself a symptom (a large ego-motion error flags the whole ground
+/// moving, which would leave nothing to judge it by).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct GroundSide {
     pub cells: u64,
@@ -189,6 +191,8 @@ pub struct GroundQuality {
     pub cells: u64,
     /// Of those, trusted (mask 0) and not moving.
     pub trusted_static_cells: u64,
+    /// Trusted ground cells flagged moving (0 when all is right).
+    pub moving_cells: u64,
     /// Dominant ground height in the LiDAR frame (median z of the candidate
     /// cells), metres: minus the sensor's height above the ground.
     pub height_m: Option<f64>,
@@ -409,26 +413,28 @@ fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
     let mut abs_fused = Vec::new();
     let mut sides: [(Vec<f64>, Vec<f64>, u64); 2] = Default::default();
     let mut trusted_static = 0u64;
+    let mut moving = 0u64;
     for &(cell, p) in &ground {
-        if looming.mask[cell] != 0 || looming.moving[cell] {
+        if looming.mask[cell] != 0 {
             continue;
         }
-        trusted_static += 1;
         let fused = f64::from(looming.fused[cell]);
         let d = f64::from(looming.disagreement[cell]);
+        if looming.moving[cell] {
+            moving += 1;
+        } else {
+            trusted_static += 1;
+            if fused.is_finite() {
+                abs_fused.push(fused.abs());
+            }
+        }
         let side = match p[1] {
             y if y > 0.0 => &mut sides[0],
             y if y < 0.0 => &mut sides[1],
-            _ => {
-                if fused.is_finite() {
-                    abs_fused.push(fused.abs());
-                }
-                continue;
-            }
+            _ => continue,
         };
         side.2 += 1;
         if fused.is_finite() {
-            abs_fused.push(fused.abs());
             side.0.push(fused);
         }
         if ego && d.is_finite() {
@@ -443,6 +449,7 @@ fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
     GroundQuality {
         cells: ground.len() as u64,
         trusted_static_cells: trusted_static,
+        moving_cells: moving,
         height_m: Some(height),
         roll_deg: plane.map(|[_, b, _]| b.atan().to_degrees()),
         pitch_deg: plane.map(|[a, _, _]| a.atan().to_degrees()),

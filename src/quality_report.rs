@@ -20,6 +20,8 @@ pub const MIN_SIDE_CELLS: u64 = 10;
 /// A ground pattern is consistent when it holds in at least this share of the
 /// pairs where both halves can be judged (and in at least two pairs).
 pub const CONSISTENT_SHARE: f64 = 0.5;
+/// Above this share of the trusted ground flagged moving, the ego motion is wrong.
+pub const GROUND_MOVING_LIMIT: f64 = 0.05;
 /// Below this trusted fraction the log is not to be trusted.
 pub const MIN_TRUSTED_FRACTION: f64 = 0.5;
 
@@ -108,8 +110,8 @@ pub struct GroundSides {
     /// Median over pairs of the per-pair medians (not a pooled median), 1/s.
     pub left_median_per_s: Option<f64>,
     pub right_median_per_s: Option<f64>,
-    /// Pairs where both halves have at least `MIN_SIDE_CELLS` trusted static
-    /// ground cells.
+    /// Pairs where both halves have at least `MIN_SIDE_CELLS` trusted ground
+    /// cells.
     pub pairs_judged: u64,
     /// Of those: left approaching and right receding (each beyond the
     /// threshold), the reverse, both approaching, both receding.
@@ -141,6 +143,10 @@ pub struct QualityTotals {
     pub range_noise: RangeNoise,
     pub ground_cells: u64,
     pub ground_trusted_static_cells: u64,
+    /// Trusted ground cells flagged moving, and their share of the trusted
+    /// ground cells (0 when all is right).
+    pub ground_moving_cells: u64,
+    pub ground_moving_fraction: Option<f64>,
     /// Median |fused| over the trusted static ground cells of all pairs,
     /// pooled (histogram bins 4.7 % wide), 1/s.
     pub ground_median_abs_fused_per_s: Option<f64>,
@@ -167,7 +173,7 @@ pub struct QualityTotals {
 /// A finding, with a stable code.
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
-    /// `ground_split`, `ground_offset`, `ground_split_d`, `ground_offset_d`,
+    /// `ground_split`, `ground_offset`, `ground_split_d`, `ground_offset_d`, `ground_moving`,
     /// `low_trust`, `no_ground`, `no_quality`.
     pub code: String,
     pub message: String,
@@ -275,6 +281,7 @@ struct Builder {
     noise_per_ring: Vec<Vec<f64>>,
     ground_cells: u64,
     ground_trusted_static: u64,
+    ground_moving: u64,
     ground_abs_fused: AbsHistogram,
     ground_fused: SideAccumulator,
     ground_d: SideAccumulator,
@@ -333,6 +340,7 @@ impl Builder {
         let g = &q.ground;
         self.ground_cells += g.cells;
         self.ground_trusted_static += g.trusted_static_cells;
+        self.ground_moving += g.moving_cells;
         self.ground_abs_fused.merge(&g.abs_fused_histogram);
         let judged = |side: &crate::quality::GroundSide, value: Option<f64>| {
             value.filter(|_| side.cells >= MIN_SIDE_CELLS)
@@ -398,6 +406,11 @@ impl Builder {
             range_noise,
             ground_cells: self.ground_cells,
             ground_trusted_static_cells: self.ground_trusted_static,
+            ground_moving_cells: self.ground_moving,
+            ground_moving_fraction: ratio(
+                self.ground_moving,
+                self.ground_moving + self.ground_trusted_static,
+            ),
             ground_median_abs_fused_per_s: self.ground_abs_fused.quantile(0.5),
             ground_p90_abs_fused_per_s: self.ground_abs_fused.quantile(0.9),
             ground_fused: self.ground_fused.finish(),
@@ -449,7 +462,10 @@ fn ground_diagnoses(sides: &GroundSides, what: &str, code_suffix: &str, out: &mu
         message: format!(
             "the ground reads {left} on the left and {right} on the right \
              ({figures}; beyond {t} 1/s with opposite signs in {count} of {n} pairs): \
-             a tilted extrinsic (roll) or a wrong LiDAR frame"
+             a tilted extrinsic (roll) or a wrong LiDAR frame: a rotation about the LiDAR's \
+             x axis is wrong (a roll rate the gyro reports but the LiDAR does not have, or \
+             misses: a gyro axis misassigned or biased, or an IMU extrinsic whose tilt turns \
+             the yaw rate of turns into roll)"
         ),
     };
     if consistent(sides.left_approaching_right_receding, n) {
@@ -534,9 +550,23 @@ fn diagnose(t: &QualityTotals) -> Vec<Diagnosis> {
         out.push(Diagnosis {
             code: "no_ground".into(),
             message: format!(
-                "no pair has {MIN_SIDE_CELLS} trusted static ground cells on both sides: the \
-                 ground checks could not be made ({} ground cells, {} trusted static)",
-                t.ground_cells, t.ground_trusted_static_cells
+                "no pair has {MIN_SIDE_CELLS} trusted ground cells on both sides: the ground \
+                 checks could not be made ({} ground cells, {} trusted)",
+                t.ground_cells,
+                t.ground_trusted_static_cells + t.ground_moving_cells
+            ),
+        });
+    }
+    if let Some(fraction) = t.ground_moving_fraction
+        && fraction > GROUND_MOVING_LIMIT
+    {
+        out.push(Diagnosis {
+            code: "ground_moving".into(),
+            message: format!(
+                "{:.1} % of the trusted ground is flagged moving (its D is significant): the \
+                 static-world prediction is wrong on the ground, so the ego motion (velocity, \
+                 extrinsic or times) is",
+                100.0 * fraction
             ),
         });
     }
@@ -646,12 +676,13 @@ impl QualityReport {
         let _ = writeln!(
             out,
             "  ground                 {} cells, {} trusted static; sensor {} m above it, \
-             roll {} deg, pitch {} deg",
+             roll {} deg, pitch {} deg; {} flagged moving",
             t.ground_cells,
             t.ground_trusted_static_cells,
             m(t.ground_height_m),
             t.ground_roll_deg.map_or("-".into(), |v| format!("{v:+.1}")),
             t.ground_pitch_deg.map_or("-".into(), |v| format!("{v:+.1}")),
+            percent(t.ground_moving_fraction),
         );
         let _ = writeln!(
             out,
