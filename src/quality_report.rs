@@ -564,8 +564,8 @@ fn diagnose(t: &QualityTotals) -> Vec<Diagnosis> {
             code: "ground_moving".into(),
             message: format!(
                 "{:.1} % of the trusted ground is flagged moving (its D is significant): the \
-                 static-world prediction is wrong on the ground, so the ego motion (velocity, \
-                 extrinsic or times) is",
+                 static-world prediction is wrong on the ground: check the ego motion (velocity, \
+                 extrinsic, times)",
                 100.0 * fraction
             ),
         });
