@@ -459,3 +459,276 @@ fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
         right,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::beams::BeamTable;
+    use crate::engine::{Availability, ImageGeometry, NO_POINT, RangeImage};
+
+    /// One cell per point (cell i holds point i), on 2 rows.
+    struct Cells {
+        points: Vec<[f32; 3]>,
+        normals: Vec<[f32; 3]>,
+        masks: Vec<u8>,
+        fused: Vec<f32>,
+        d: Vec<f32>,
+        moving: Vec<bool>,
+    }
+
+    impl Cells {
+        fn new() -> Self {
+            Self {
+                points: Vec::new(),
+                normals: Vec::new(),
+                masks: Vec::new(),
+                fused: Vec::new(),
+                d: Vec::new(),
+                moving: Vec::new(),
+            }
+        }
+
+        fn push(&mut self, p: [f32; 3], n: [f32; 3], mask: u8, fused: f32, d: f32) -> usize {
+            self.points.push(p);
+            self.normals.push(n);
+            self.masks.push(mask);
+            self.fused.push(fused);
+            self.d.push(d);
+            self.moving.push(false);
+            self.points.len() - 1
+        }
+
+        fn build(mut self, ego: bool) -> (PairLooming, Scan) {
+            if self.points.len() % 2 == 1 {
+                // Pad to two full rows with an empty cell (no point).
+                self.normals.push([0.0; 3]);
+                self.masks.push(mask::EMPTY);
+                self.fused.push(f32::NAN);
+                self.d.push(f32::NAN);
+                self.moving.push(false);
+            }
+            let cells = self.masks.len();
+            let n_points = self.points.len();
+            let geometry = ImageGeometry {
+                rows: 2,
+                cols: cells / 2,
+                beams: BeamTable::uniform(2, -0.3, 0.0),
+                ring_to_row: None,
+            };
+            let point: Vec<u32> = (0..cells)
+                .map(|c| if c < n_points { c as u32 } else { NO_POINT })
+                .collect();
+            let range_m = (0..cells)
+                .map(|c| {
+                    self.points
+                        .get(c)
+                        .map_or(f32::NAN, |p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+                })
+                .collect();
+            // An empty-masked cell's point is no cell's surface.
+            let point_surface = (0..n_points)
+                .map(|i| {
+                    if self.masks[i] & mask::EMPTY != 0 {
+                        NO_POINT
+                    } else {
+                        i as u32
+                    }
+                })
+                .collect();
+            let image = RangeImage {
+                range_m,
+                point,
+                point_cell: (0..n_points as u32).collect(),
+                point_surface,
+            };
+            let nan = vec![f32::NAN; cells];
+            let looming = PairLooming {
+                geometry,
+                availability: Availability {
+                    ego_velocity: ego,
+                    rotation_compensated: true,
+                },
+                image,
+                l_lidar: nan.clone(),
+                l_ray_ego: nan.clone(),
+                disagreement: self.d,
+                sigma_per_s: nan.clone(),
+                confidence: nan.clone(),
+                mask: self.masks,
+                disagrees: vec![false; cells],
+                moving: self.moving,
+                fused: self.fused,
+                threat: vec![ThreatLevel::None; cells],
+                incidence_cos: vec![1.0; cells],
+                normal: self.normals,
+                range_noise_m_per_row: vec![0.02, 0.03],
+                dt_s: vec![0.1; cells],
+                l_ego: vec![f32::NAN; n_points],
+                point_threat: vec![ThreatLevel::None; n_points],
+                spheres: None,
+                velocity_mps: None,
+            };
+            let scan = Scan {
+                stamp_ns: 0,
+                frame_id: "lidar".into(),
+                sensor_pose: nalgebra::Isometry3::identity(),
+                points_m: self.points,
+                intensity: None,
+                ring: None,
+                time_offset_s: None,
+                source_index: (0..n_points as u32).collect(),
+                input_point_count: n_points as u32,
+                skipped_invalid_points: 0,
+            };
+            (looming, scan)
+        }
+    }
+
+    const UP: [f32; 3] = [0.0, 0.0, 1.0];
+    const FACING: [f32; 3] = [-1.0, 0.0, 0.0];
+
+    #[test]
+    fn counts_trusted_points_cells_and_masks() {
+        let mut cells = Cells::new();
+        for k in 0..6 {
+            cells.push([10.0, k as f32, 0.5], FACING, 0, 0.1, 0.0);
+        }
+        cells.push([10.0, 7.0, 0.5], FACING, mask::EDGE, 0.1, 0.0);
+        cells.push(
+            [10.0, 8.0, 0.5],
+            FACING,
+            mask::EDGE | mask::OCCLUSION,
+            0.1,
+            0.0,
+        );
+        cells.push([10.0, 9.0, 0.5], FACING, mask::GRAZING, 0.1, 0.0);
+        // A point whose cell is empty of surface (hidden return): not trusted,
+        // its cell not occupied.
+        cells.push([12.0, 9.0, 0.5], FACING, mask::EMPTY, f32::NAN, f32::NAN);
+        let (looming, scan) = cells.build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        assert_eq!(q.points, 10);
+        assert_eq!(q.trusted_points, 6);
+        assert_eq!(q.trusted_fraction, Some(0.6));
+        assert_eq!(q.cells, 9);
+        assert_eq!(q.trusted_cells, 6);
+        assert_eq!(
+            q.masked_cells,
+            MaskCounts {
+                edge: 2,
+                occlusion: 1,
+                grazing: 1,
+                ..MaskCounts::default()
+            }
+        );
+        assert_eq!(q.masked_cells.dominant(), Some(("edge", 2)));
+        assert_eq!(q.static_cells, 6);
+        assert_eq!(q.median_abs_d_static_per_s, Some(0.0));
+        assert_eq!(q.moving_fraction, Some(0.0));
+        assert_eq!(q.range_noise_m_per_ring, vec![0.02, 0.03]);
+        assert_eq!(q.ground.cells, 0);
+        assert_eq!(q.ground.median_abs_fused_per_s, None);
+    }
+
+    #[test]
+    fn without_ego_velocity_there_is_no_d_figure() {
+        let mut cells = Cells::new();
+        cells.push([10.0, 0.0, 0.5], FACING, 0, 0.1, f32::NAN);
+        cells.push([10.0, 1.0, 0.5], FACING, 0, 0.1, f32::NAN);
+        let (looming, scan) = cells.build(false);
+        let q = PairQuality::measure(&looming, &scan);
+        assert!(!q.ego_velocity);
+        assert_eq!(q.median_abs_d_static_per_s, None);
+        assert_eq!(q.abs_d_static_histogram, None);
+    }
+
+    /// A road 1.7 m below the sensor, rising to the left at `slope` (dz/dy),
+    /// 20 cells a side, reading `left` and `right`; plus what is not ground.
+    fn road(slope: f32, left: f32, right: f32) -> Cells {
+        let mut cells = Cells::new();
+        for k in 0..20 {
+            let x = 4.0 + k as f32;
+            for y in [2.5f32, -2.5] {
+                let z = -1.7 + slope * y;
+                let fused = if y > 0.0 { left } else { right };
+                cells.push([x, y, z], UP, 0, fused, fused);
+            }
+        }
+        // Not ground: a car roof (up, 1.5 m above the road), a wall (facing
+        // the sensor), an awning above the sensor (normal down... facing the
+        // sensor: down), a steep bank (normal 30 deg off z).
+        cells.push([8.0, 0.5, -0.2], UP, 0, 0.9, 0.9);
+        cells.push([15.0, 0.0, -1.0], FACING, 0, 0.9, 0.9);
+        cells.push([5.0, 0.0, 2.0], [0.0, 0.0, -1.0], 0, 0.9, 0.9);
+        cells.push([6.0, 3.0, -1.6], [0.0, -0.5, 0.866], 0, 0.9, 0.9);
+        cells
+    }
+
+    #[test]
+    fn classifies_the_ground_and_reads_its_halves() {
+        let (looming, scan) = road(0.0, 0.004, -0.002).build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        let g = &q.ground;
+        assert_eq!(g.cells, 40);
+        assert_eq!(g.trusted_static_cells, 40);
+        assert!((g.height_m.unwrap() + 1.7).abs() < 1e-6);
+        assert!(g.roll_deg.unwrap().abs() < 1e-3);
+        assert!(g.pitch_deg.unwrap().abs() < 1e-3);
+        assert_eq!(g.left.cells, 20);
+        assert_eq!(g.right.cells, 20);
+        assert!((g.left.median_fused_per_s.unwrap() - 0.004).abs() < 1e-6);
+        assert!((g.right.median_fused_per_s.unwrap() + 0.002).abs() < 1e-6);
+        assert!((g.left.median_d_per_s.unwrap() - 0.004).abs() < 1e-6);
+        // |fused| over both halves: 20 x 0.002 and 20 x 0.004.
+        assert!((g.median_abs_fused_per_s.unwrap() - 0.003).abs() < 1e-6);
+        assert_eq!(g.abs_fused_histogram.count(), 40);
+    }
+
+    #[test]
+    fn a_tilted_ground_is_still_ground_and_its_slope_is_measured() {
+        // 3 degrees of roll: the far side 0.13 m off the median height.
+        let slope = 3f32.to_radians().tan();
+        let (looming, scan) = road(slope, 0.03, -0.03).build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        let g = &q.ground;
+        assert_eq!(g.cells, 40);
+        assert!((g.roll_deg.unwrap() - 3.0).abs() < 0.01, "{:?}", g.roll_deg);
+        assert!(g.pitch_deg.unwrap().abs() < 0.01);
+        assert!(g.left.median_fused_per_s.unwrap() > 0.02);
+        assert!(g.right.median_fused_per_s.unwrap() < -0.02);
+    }
+
+    #[test]
+    fn moving_ground_cells_count_in_the_halves_but_not_in_the_static_median() {
+        let mut cells = road(0.0, 0.5, 0.5);
+        for m in cells.moving.iter_mut().take(40) {
+            *m = true;
+        }
+        let (looming, scan) = cells.build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        assert_eq!(q.ground.moving_cells, 40);
+        assert_eq!(q.ground.trusted_static_cells, 0);
+        assert_eq!(q.ground.median_abs_fused_per_s, None);
+        assert_eq!(q.ground.left.median_fused_per_s, Some(0.5));
+        assert_eq!(q.moving_cells, 40);
+    }
+
+    #[test]
+    fn histogram_quantiles_pool_exactly_to_a_bin() {
+        let mut a = AbsHistogram::of([0.001, 0.002, 0.003].into_iter());
+        let b = AbsHistogram::of([0.004, 0.005, -0.006, f64::NAN].into_iter());
+        a.merge(&b);
+        assert_eq!(a.count(), 6);
+        let median = a.quantile(0.5).unwrap();
+        assert!((median / 0.003 - 1.0).abs() < 0.025, "{median}");
+        assert_eq!(AbsHistogram::default().quantile(0.5), None);
+        assert_eq!(AbsHistogram::of([0.0].into_iter()).quantile(0.5), Some(0.0));
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&mut []), None);
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), Some(2.5));
+    }
+}
