@@ -74,13 +74,13 @@ impl MaskCounts {
 
     /// The bit masking the most cells (`None` when nothing is masked).
     pub fn dominant(&self) -> Option<(&'static str, u64)> {
-        self.named()
-            .into_iter()
-            .filter(|&(_, n)| n > 0)
-            .fold(None, |best: Option<(&str, u64)>, (name, n)| match best {
+        self.named().into_iter().filter(|&(_, n)| n > 0).fold(
+            None,
+            |best: Option<(&str, u64)>, (name, n)| match best {
                 Some((_, m)) if m >= n => best,
                 _ => Some((name, n)),
-            })
+            },
+        )
     }
 }
 
@@ -296,7 +296,11 @@ impl PairQuality {
             }
             occupied += 1;
             masked.add_bits(bits);
-            if looming.threat.get(cell).is_some_and(|t| *t != ThreatLevel::None) {
+            if looming
+                .threat
+                .get(cell)
+                .is_some_and(|t| *t != ThreatLevel::None)
+            {
                 threat += 1;
             }
             if bits != 0 {
@@ -314,11 +318,7 @@ impl PairQuality {
         }
         let static_cells = trusted - moving;
         let abs_d_static_histogram = ego.then(|| AbsHistogram::of(abs_d_static.iter().copied()));
-        let median_abs_d_static_per_s = if ego {
-            median(&mut abs_d_static)
-        } else {
-            None
-        };
+        let median_abs_d_static_per_s = if ego { median(&mut abs_d_static) } else { None };
         Self {
             points,
             trusted_points,
@@ -520,9 +520,9 @@ mod tests {
                 .collect();
             let range_m = (0..cells)
                 .map(|c| {
-                    self.points
-                        .get(c)
-                        .map_or(f32::NAN, |p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+                    self.points.get(c).map_or(f32::NAN, |p| {
+                        (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
+                    })
                 })
                 .collect();
             // An empty-masked cell's point is no cell's surface.

@@ -29,9 +29,7 @@ pub const MIN_TRUSTED_FRACTION: f64 = 0.5;
 pub enum QualityError {
     #[error(transparent)]
     Input(#[from] InputError),
-    #[error(
-        "{path}: no /looming/pairs channel: not written by `looming process` (run it first)"
-    )]
+    #[error("{path}: no /looming/pairs channel: not written by `looming process` (run it first)")]
     NotProcessed { path: String },
     #[error("{path}: /looming/pairs message at log time {log_time_ns}: {reason}")]
     BadRecord {
@@ -681,7 +679,8 @@ impl QualityReport {
             t.ground_trusted_static_cells,
             m(t.ground_height_m),
             t.ground_roll_deg.map_or("-".into(), |v| format!("{v:+.1}")),
-            t.ground_pitch_deg.map_or("-".into(), |v| format!("{v:+.1}")),
+            t.ground_pitch_deg
+                .map_or("-".into(), |v| format!("{v:+.1}")),
             percent(t.ground_moving_fraction),
         );
         let _ = writeln!(
@@ -796,7 +795,8 @@ mod tests {
         assert_eq!(codes(&r), ["ground_split"]);
         let message = &r.diagnoses[0].message;
         assert!(
-            message.starts_with("the ground reads approaching on the left and receding on the right"),
+            message
+                .starts_with("the ground reads approaching on the left and receding on the right"),
             "{message}"
         );
         assert!(message.contains("a tilted extrinsic (roll) or a wrong LiDAR frame"));
@@ -822,8 +822,16 @@ mod tests {
     fn the_same_sign_on_both_halves_is_an_offset() {
         let r = report((0..3).map(|i| pair(i, -0.05, -0.03, 90)).collect());
         assert_eq!(codes(&r), ["ground_offset"]);
-        assert!(r.diagnoses[0].message.contains("the whole ground reads receding"));
-        assert!(r.diagnoses[0].message.contains("vertical velocity / pitch error"));
+        assert!(
+            r.diagnoses[0]
+                .message
+                .contains("the whole ground reads receding")
+        );
+        assert!(
+            r.diagnoses[0]
+                .message
+                .contains("vertical velocity / pitch error")
+        );
         assert!(r.diagnoses[0].message.contains("time offset"));
     }
 
@@ -832,8 +840,14 @@ mod tests {
         let r = report((0..3).map(|i| pair(i, 0.0, 0.0, 20)).collect());
         assert_eq!(codes(&r), ["low_trust"]);
         let message = &r.diagnoses[0].message;
-        assert!(message.contains("only 20.0 % of the points are trusted"), "{message}");
-        assert!(message.contains("`occlusion` (80.0 % of occupied cells)"), "{message}");
+        assert!(
+            message.contains("only 20.0 % of the points are trusted"),
+            "{message}"
+        );
+        assert!(
+            message.contains("`occlusion` (80.0 % of occupied cells)"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -35,10 +35,8 @@ fn process_and_quality(input: &Path, dir: &Path, name: &str, extra: &[&str]) -> 
     let text = String::from_utf8(run.stdout).unwrap();
     println!("== {name}\n{text}");
     let report: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let schema: Value = serde_json::from_str(include_str!(
-        "../schemas/looming.QualityReport.schema.json"
-    ))
-    .unwrap();
+    let schema: Value =
+        serde_json::from_str(include_str!("../schemas/looming.QualityReport.schema.json")).unwrap();
     let validator = jsonschema::validator_for(&schema).unwrap();
     if let Err(error) = validator.validate(&report) {
         panic!("{name}: the report does not match its schema: {error}");
@@ -108,7 +106,10 @@ fn straight_road_is_a_trustworthy_log() {
     assert!((number(&report, "/totals/ground_pitch_deg") + 1.5).abs() < 0.5);
     // The engine's default range noise on every one of the 32 rings.
     assert_eq!(totals["range_noise"]["rings"], 32);
-    assert_eq!(number(&report, "/totals/range_noise/median_m"), 0.02f32 as f64);
+    assert_eq!(
+        number(&report, "/totals/range_noise/median_m"),
+        0.02f32 as f64
+    );
     assert!(codes(&report).is_empty(), "{text}");
     assert!(text.contains("nothing to report"));
     // No layout recorded yet by this process: reported as unknown, or the
@@ -150,8 +151,14 @@ fn a_rolled_extrinsic_offsets_the_whole_ground() {
     let (rolled, text) =
         process_and_quality(&input, &dir, "rolled", &["--extrinsic", ROLLED_EXTRINSIC]);
     let codes = codes(&rolled);
-    assert!(codes.iter().any(|c| c.starts_with("ground_offset")), "{text}");
-    assert!(!codes.iter().any(|c| c.starts_with("ground_split")), "{text}");
+    assert!(
+        codes.iter().any(|c| c.starts_with("ground_offset")),
+        "{text}"
+    );
+    assert!(
+        !codes.iter().any(|c| c.starts_with("ground_split")),
+        "{text}"
+    );
     assert!(
         number(&rolled, "/totals/ground_median_abs_fused_per_s") > 0.02,
         "{text}"
@@ -191,7 +198,10 @@ fn a_roll_rate_error_splits_the_ground_left_and_right() {
     with_roll_rate(&sample("straight-road.mcap"), &input, 0.03);
     let (report, text) = process_and_quality(&input, &dir, "roll-rate", &[]);
     let codes = codes(&report);
-    assert!(codes.iter().any(|c| c.starts_with("ground_split")), "{text}");
+    assert!(
+        codes.iter().any(|c| c.starts_with("ground_split")),
+        "{text}"
+    );
     assert!(
         text.contains("on the left and")
             && text.contains("a tilted extrinsic (roll) or a wrong LiDAR frame"),

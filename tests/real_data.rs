@@ -38,7 +38,10 @@ fn real_logs() -> Option<Vec<PathBuf>> {
         .collect();
     logs.sort();
     if logs.is_empty() {
-        eprintln!("SKIPPED: ../shared/real-data holds no .mcap ({})", dir.display());
+        eprintln!(
+            "SKIPPED: ../shared/real-data holds no .mcap ({})",
+            dir.display()
+        );
         return None;
     }
     Some(logs)
@@ -91,8 +94,10 @@ fn real_logs_run_and_print_their_quality() {
         );
         table.push(format!(
             "{name:<40} trusted {:>7}  ground |fused| {:>8}  events {}  dominant mask {}  masks {}",
-            figure(&report, "trusted_fraction").map_or("-".into(), |f| format!("{:.1} %", 100.0 * f)),
-            figure(&report, "ground_median_abs_fused_per_s").map_or("-".into(), |f| format!("{f:.4}")),
+            figure(&report, "trusted_fraction")
+                .map_or("-".into(), |f| format!("{:.1} %", 100.0 * f)),
+            figure(&report, "ground_median_abs_fused_per_s")
+                .map_or("-".into(), |f| format!("{f:.4}")),
             totals["near_miss_events"],
             totals["dominant_mask"],
             totals["masked_cell_fractions"],
