@@ -69,6 +69,12 @@ enum Command {
     /// ranked by minimum time to contact.
     #[command(after_help = EXIT_CODES)]
     Events(EventsArgs),
+    /// The quality figures of an annotated log: per scan and in total the
+    /// trusted fraction, the static ground's looming (left and right), |D| on
+    /// static cells, moving cells, range noise, layout and near-miss events,
+    /// with diagnoses (see docs/quality.md).
+    #[command(after_help = EXIT_CODES)]
+    Quality(QualityArgs),
     /// Convert a KITTI raw drive folder (Velodyne scans, OXTS, calibration) to a
     /// ROS 2 MCAP that `process` reads (see docs/kitti.md).
     #[command(name = "import-kitti", after_help = SYNTH_EXIT_CODES)]
@@ -300,6 +306,16 @@ struct EventsArgs {
 }
 
 #[derive(Debug, Args)]
+struct QualityArgs {
+    /// An MCAP written by `looming process`.
+    file: PathBuf,
+    /// Also write the report as JSON to this file
+    /// (schema: schemas/looming.QualityReport.schema.json).
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
 struct InspectArgs {
     /// MCAP file to inspect.
     file: PathBuf,
@@ -339,6 +355,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Synth(args) => synth(args),
         Command::Eval(args) => eval(args),
         Command::Events(args) => events(args),
+        Command::Quality(args) => quality(args),
         Command::ImportKitti(args) => import_kitti(args),
         Command::Render(args) => render(args),
     }
@@ -432,6 +449,23 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
         summary.height_px,
         summary.output.display()
     );
+    Ok(())
+}
+
+fn quality(args: QualityArgs) -> Result<(), Failure> {
+    let report = looming::quality_report::read_quality(&args.file).map_err(|error| {
+        let usage = matches!(
+            error,
+            looming::quality_report::QualityError::NotProcessed { .. }
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
+    })?;
+    print!("{}", report.to_text());
+    if let Some(path) = &args.json {
+        let json = serde_json::to_vec_pretty(&report)?;
+        std::fs::write(path, json)
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    }
     Ok(())
 }
 

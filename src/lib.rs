@@ -18,6 +18,8 @@ pub mod messages;
 pub mod output;
 pub mod pairing;
 pub mod pipeline;
+pub mod quality;
+pub mod quality_report;
 pub mod render;
 pub mod replay;
 pub mod ros;

@@ -527,7 +527,11 @@ fn emit(
     for event in events {
         match event {
             PairEvent::Pair(pair) => {
-                let record = PairRecord::from_pair(&pair);
+                // The pair's quality figures come from its annotation; its
+                // record still goes out first.
+                let annotation = annotator.annotate(&pair);
+                let mut record = PairRecord::from_pair(&pair);
+                record.quality = annotator.take_quality();
                 let data = serde_json::to_vec(&record).expect("pair records always serialise");
                 let item = ToWriter::Own(OwnMessage {
                     channel_id: pairs_channel,
@@ -539,7 +543,7 @@ fn emit(
                 if tx.send(item).is_err() {
                     return false;
                 }
-                for message in annotator.annotate(&pair) {
+                for message in annotation {
                     if tx.send(ToWriter::Own(message)).is_err() {
                         return false;
                     }

@@ -8,6 +8,8 @@ use looming::output::OutputOptions;
 use looming::synth::{SynthOptions, synthesize};
 
 /// (file, scenario, --start, --duration): 32 beams x 512 columns, zstd level 19.
+/// Only these are compared: `ouster-os0-8.mcap` is a real recording (see
+/// sample_logs/README.md), not generated.
 const SAMPLES: &[(&str, &str, Option<f64>, f64)] = &[
     ("straight-road.mcap", "straight-road", None, 2.0),
     ("urban-turn.mcap", "urban-turn", None, 2.0),

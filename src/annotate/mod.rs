@@ -15,6 +15,7 @@ use crate::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
 use crate::events::{EVENT_SCHEMA, EventConfig, EventDetector, NearMissEvent, PairFrame};
 use crate::output::OwnChannelSpec;
 use crate::pairing::ScanPair;
+use crate::quality::PairQuality;
 
 pub use self::foxglove::FieldSet;
 
@@ -133,6 +134,7 @@ pub struct Annotator {
     detector: EventDetector,
     events: Vec<NearMissEvent>,
     stats: AnnotateStats,
+    quality: Option<PairQuality>,
 }
 
 impl Annotator {
@@ -148,6 +150,7 @@ impl Annotator {
             cache: EngineCache::default(),
             events: Vec::new(),
             stats: AnnotateStats::default(),
+            quality: None,
         }
     }
 
@@ -160,15 +163,24 @@ impl Annotator {
         &self.events
     }
 
+    /// The quality figures of the pair last annotated (`None` when the engine
+    /// made no image of it), for its `/looming/pairs` message; taken once.
+    pub fn take_quality(&mut self) -> Option<PairQuality> {
+        self.quality.take()
+    }
+
     /// The messages of one pair (and of the events that ended before it).
+    /// Its quality figures are then in [`Annotator::take_quality`].
     pub fn annotate(&mut self, pair: &ScanPair) -> Vec<OwnMessage> {
         let started = Instant::now();
         let looming = compute_with_cache(pair, &self.config.engine, &mut self.cache);
         self.stats.engine_s += started.elapsed().as_secs_f64();
+        self.quality = None;
         let Some(looming) = looming else {
             self.stats.pairs_without_image += 1;
             return Vec::new();
         };
+        self.quality = Some(PairQuality::measure(&looming, &pair.current));
         self.stats.pairs_annotated += 1;
         if !looming.availability.ego_velocity {
             self.stats.pairs_lidar_only += 1;

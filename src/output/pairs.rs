@@ -8,6 +8,7 @@ use crate::engine::layout::{RingSource, ScanLayout, TimeSource};
 use crate::messages::Scan;
 use crate::pairing::ScanPair;
 use crate::pairing::frames::ExtrinsicInfo;
+use crate::quality::PairQuality;
 
 pub const PAIRS_TOPIC: &str = "/looming/pairs";
 const PAIRS_SCHEMA: &str = include_str!("../../schemas/looming.ScanPair.schema.json");
@@ -29,6 +30,10 @@ pub struct PairRecord {
     pub speed_mps: Option<f64>,
     pub unavailable: Vec<String>,
     pub extrinsic: ExtrinsicRecord,
+    /// Quality figures of the pair's looming (`docs/quality.md`); absent when
+    /// the engine made no image of the pair.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<PairQuality>,
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
@@ -122,6 +127,7 @@ impl PairRecord {
                 velocity: extrinsic_source(pair.motion.velocity_extrinsic.as_ref()),
                 imu: extrinsic_source(pair.motion.imu_extrinsic.as_ref()),
             },
+            quality: None,
         }
     }
 }

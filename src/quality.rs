@@ -1,0 +1,734 @@
+//! Per-pair quality figures: what a fleet engineer checks before trusting a
+//! processed log (`docs/quality.md`). A pure function of the engine's result
+//! and the current scan (no I/O), computed by the annotator for every pair and
+//! written into the pair's `/looming/pairs` message (`quality`);
+//! `looming quality` (`crate::quality_report`) sums them over a log.
+//!
+//! The static ground is found without ego information, so it can judge the
+//! ego motion: cells whose fitted normal is within 15 degrees of the LiDAR's
+//! z axis, whose return lies below the sensor, and near the scan's dominant
+//! ground height (the median height of such cells), then near the plane fitted
+//! through those (a tilted mount or a sloped road keeps its ground). On a
+//! static ground looming along rays is 0 whatever the ego motion, so its
+//! fused value measures the error of the whole chain (extrinsic, velocity,
+//! times); left and right halves are kept apart because a rotation error
+//! about the x axis reads with opposite signs on them.
+
+use serde::{Deserialize, Serialize};
+
+use crate::engine::{PairLooming, ThreatLevel, mask};
+use crate::messages::Scan;
+
+/// Largest angle between a ground cell's normal and the LiDAR's z axis.
+pub const GROUND_MAX_TILT_DEG: f64 = 15.0;
+/// First pass: distance from the dominant ground height allowed at the
+/// sensor, metres, ...
+pub const GROUND_HEIGHT_TOLERANCE_M: f64 = 0.3;
+/// ... growing by this much per metre of horizontal distance (a 3 degree
+/// tilt or slope).
+pub const GROUND_HEIGHT_TOLERANCE_PER_M: f64 = 0.05;
+/// Second pass: distance from the plane fitted through the first pass.
+pub const GROUND_PLANE_TOLERANCE_M: f64 = 0.15;
+pub const GROUND_PLANE_TOLERANCE_PER_M: f64 = 0.02;
+/// Fewest first-pass cells to fit a plane through.
+const MIN_PLANE_CELLS: usize = 30;
+
+/// Why occupied cells are masked: cells per `engine::mask` bit (a cell may
+/// carry several bits; empty cells are not counted).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MaskCounts {
+    pub no_previous: u64,
+    pub edge: u64,
+    pub grazing: u64,
+    pub no_ego: u64,
+    pub occlusion: u64,
+}
+
+impl MaskCounts {
+    fn add_bits(&mut self, bits: u8) {
+        self.no_previous += u64::from(bits & mask::NO_PREVIOUS != 0);
+        self.edge += u64::from(bits & mask::EDGE != 0);
+        self.grazing += u64::from(bits & mask::GRAZING != 0);
+        self.no_ego += u64::from(bits & mask::NO_EGO != 0);
+        self.occlusion += u64::from(bits & mask::OCCLUSION != 0);
+    }
+
+    pub fn add(&mut self, other: &MaskCounts) {
+        self.no_previous += other.no_previous;
+        self.edge += other.edge;
+        self.grazing += other.grazing;
+        self.no_ego += other.no_ego;
+        self.occlusion += other.occlusion;
+    }
+
+    /// (name, cells) per bit, in bit order.
+    pub fn named(&self) -> [(&'static str, u64); 5] {
+        [
+            ("no_previous", self.no_previous),
+            ("edge", self.edge),
+            ("grazing", self.grazing),
+            ("no_ego", self.no_ego),
+            ("occlusion", self.occlusion),
+        ]
+    }
+
+    /// The bit masking the most cells (`None` when nothing is masked).
+    pub fn dominant(&self) -> Option<(&'static str, u64)> {
+        self.named().into_iter().filter(|&(_, n)| n > 0).fold(
+            None,
+            |best: Option<(&str, u64)>, (name, n)| match best {
+                Some((_, m)) if m >= n => best,
+                _ => Some((name, n)),
+            },
+        )
+    }
+}
+
+/// A histogram of absolute values on log-spaced bins (50 per decade from
+/// 1e-4 to 100 1/s: bins 4.7 % wide), kept sparse, so that medians over a
+/// whole log can be pooled in bounded memory.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AbsHistogram {
+    /// `[bin, count]`, bins ascending: bin 0 holds |x| < 1e-4, bin `k >= 1`
+    /// holds `1e-4 * 10^((k-1)/50) <= |x| < 1e-4 * 10^(k/50)`, bin 301 holds
+    /// everything from 100 up.
+    pub counts: Vec<[u64; 2]>,
+}
+
+const HIST_LOWEST: f64 = 1e-4;
+const HIST_BINS_PER_DECADE: f64 = 50.0;
+const HIST_LAST_BIN: u64 = 301;
+
+impl AbsHistogram {
+    fn bin(value: f64) -> u64 {
+        let magnitude = value.abs();
+        if magnitude < HIST_LOWEST {
+            0
+        } else {
+            (((magnitude / HIST_LOWEST).log10() * HIST_BINS_PER_DECADE) as u64 + 1)
+                .min(HIST_LAST_BIN)
+        }
+    }
+
+    /// Geometric centre of a bin (0 for the lowest, the lower edge of the last).
+    fn centre(bin: u64) -> f64 {
+        match bin {
+            0 => 0.0,
+            HIST_LAST_BIN => HIST_LOWEST * 10f64.powf((HIST_LAST_BIN - 1) as f64 / 50.0),
+            k => HIST_LOWEST * 10f64.powf((k as f64 - 0.5) / HIST_BINS_PER_DECADE),
+        }
+    }
+
+    /// The histogram of `values` (non-finite values skipped).
+    pub fn of(values: impl Iterator<Item = f64>) -> Self {
+        let mut dense = vec![0u64; HIST_LAST_BIN as usize + 1];
+        for value in values.filter(|v| v.is_finite()) {
+            dense[Self::bin(value) as usize] += 1;
+        }
+        Self::from_dense(&dense)
+    }
+
+    fn from_dense(dense: &[u64]) -> Self {
+        Self {
+            counts: dense
+                .iter()
+                .enumerate()
+                .filter(|&(_, &n)| n > 0)
+                .map(|(bin, &n)| [bin as u64, n])
+                .collect(),
+        }
+    }
+
+    pub fn count(&self) -> u64 {
+        self.counts.iter().map(|c| c[1]).sum()
+    }
+
+    /// The sum of both.
+    pub fn merge(&mut self, other: &AbsHistogram) {
+        let mut dense = vec![0u64; HIST_LAST_BIN as usize + 1];
+        for [bin, n] in self.counts.iter().chain(&other.counts) {
+            dense[(*bin).min(HIST_LAST_BIN) as usize] += n;
+        }
+        *self = Self::from_dense(&dense);
+    }
+
+    /// The value below which a fraction `q` of the samples lie (the centre of
+    /// its bin: within 2.3 %); `None` when empty.
+    pub fn quantile(&self, q: f64) -> Option<f64> {
+        let total = self.count();
+        if total == 0 {
+            return None;
+        }
+        let wanted = ((q * total as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for [bin, n] in &self.counts {
+            seen += n;
+            if seen >= wanted {
+                return Some(Self::centre(*bin));
+            }
+        }
+        self.counts.last().map(|c| Self::centre(c[0]))
+    }
+}
+
+/// One half of the ground (left: y > 0, right: y < 0), trusted cells only,
+/// those flagged moving included: the ground does not move, so a moving flag
+/// on it is itself a symptom (a large ego-motion error flags the whole ground
+/// moving, which would leave nothing to judge it by).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct GroundSide {
+    pub cells: u64,
+    /// Median fused looming, 1/s (0 on a static ground when all is right).
+    pub median_fused_per_s: Option<f64>,
+    /// Median `D = L_lidar - L_ray_ego`, 1/s (`None` without ego velocity).
+    pub median_d_per_s: Option<f64>,
+}
+
+/// The ground of one scan, found without ego information.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GroundQuality {
+    /// Occupied cells classified as ground (any mask).
+    pub cells: u64,
+    /// Of those, trusted (mask 0) and not moving.
+    pub trusted_static_cells: u64,
+    /// Trusted ground cells flagged moving (0 when all is right).
+    pub moving_cells: u64,
+    /// Dominant ground height in the LiDAR frame (median z of the candidate
+    /// cells), metres: minus the sensor's height above the ground.
+    pub height_m: Option<f64>,
+    /// Slope of the plane fitted through the ground, seen in the LiDAR
+    /// frame: about x (positive when the ground rises to the left) and about
+    /// y (positive when it rises ahead), degrees. A level mount on a flat road
+    /// reads 0.
+    pub roll_deg: Option<f64>,
+    pub pitch_deg: Option<f64>,
+    /// Median |fused| over the trusted static ground cells, 1/s.
+    pub median_abs_fused_per_s: Option<f64>,
+    /// The same values, for pooling over a log.
+    pub abs_fused_histogram: AbsHistogram,
+    pub left: GroundSide,
+    pub right: GroundSide,
+}
+
+/// The quality figures of one pair (`/looming/pairs` `quality`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PairQuality {
+    /// Valid points of the current scan.
+    pub points: u64,
+    /// Points that are their cell's surface, in a cell with mask 0.
+    pub trusted_points: u64,
+    /// `trusted_points / points`: the headline figure.
+    pub trusted_fraction: Option<f64>,
+    /// Occupied cells of the range image (a return in the current scan).
+    pub cells: u64,
+    /// Occupied cells with mask 0.
+    pub trusted_cells: u64,
+    pub trusted_cell_fraction: Option<f64>,
+    /// Occupied cells per mask bit.
+    pub masked_cells: MaskCounts,
+    pub ground: GroundQuality,
+    /// Trusted cells not flagged moving.
+    pub static_cells: u64,
+    /// Median |L_lidar - L_ray_ego| over the trusted static cells, 1/s
+    /// (`None` without ego velocity).
+    pub median_abs_d_static_per_s: Option<f64>,
+    /// The same values, for pooling over a log (`None` without ego velocity).
+    pub abs_d_static_histogram: Option<AbsHistogram>,
+    /// Trusted cells flagged moving.
+    pub moving_cells: u64,
+    /// `moving_cells / trusted_cells`.
+    pub moving_fraction: Option<f64>,
+    /// Cells at a threat level (low or above).
+    pub threat_cells: u64,
+    /// A velocity source covered the pair.
+    pub ego_velocity: bool,
+    /// Range noise (1 sigma) the engine used per ring (beam, lowest first), m.
+    pub range_noise_m_per_ring: Vec<f32>,
+}
+
+fn ratio(part: u64, whole: u64) -> Option<f64> {
+    (whole > 0).then(|| part as f64 / whole as f64)
+}
+
+/// Median (mean of the two middle values for an even count); `None` when empty.
+pub fn median(values: &mut [f64]) -> Option<f64> {
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let (_, &mut upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
+    if n % 2 == 1 {
+        return Some(upper);
+    }
+    let lower = values[..n / 2]
+        .iter()
+        .copied()
+        .max_by(f64::total_cmp)
+        .expect("n >= 2");
+    Some(0.5 * (lower + upper))
+}
+
+impl PairQuality {
+    /// The figures of one pair: `looming` as the engine computed it for the
+    /// pair whose current scan is `current`.
+    pub fn measure(looming: &PairLooming, current: &Scan) -> Self {
+        let cells = looming.mask.len();
+        let points = current.points_m.len() as u64;
+        let trusted_points = (0..current.points_m.len())
+            .filter(|&i| {
+                looming
+                    .image
+                    .surface_cell(i)
+                    .is_some_and(|cell| looming.mask.get(cell) == Some(&0))
+            })
+            .count() as u64;
+        let mut occupied = 0u64;
+        let mut trusted = 0u64;
+        let mut masked = MaskCounts::default();
+        let mut moving = 0u64;
+        let mut threat = 0u64;
+        let mut abs_d_static = Vec::new();
+        let ego = looming.availability.ego_velocity;
+        for cell in 0..cells {
+            let bits = looming.mask[cell];
+            if bits & mask::EMPTY != 0 {
+                continue;
+            }
+            occupied += 1;
+            masked.add_bits(bits);
+            if looming
+                .threat
+                .get(cell)
+                .is_some_and(|t| *t != ThreatLevel::None)
+            {
+                threat += 1;
+            }
+            if bits != 0 {
+                continue;
+            }
+            trusted += 1;
+            if looming.moving[cell] {
+                moving += 1;
+            } else if ego {
+                let d = f64::from(looming.disagreement[cell]);
+                if d.is_finite() {
+                    abs_d_static.push(d.abs());
+                }
+            }
+        }
+        let static_cells = trusted - moving;
+        let abs_d_static_histogram = ego.then(|| AbsHistogram::of(abs_d_static.iter().copied()));
+        let median_abs_d_static_per_s = if ego { median(&mut abs_d_static) } else { None };
+        Self {
+            points,
+            trusted_points,
+            trusted_fraction: ratio(trusted_points, points),
+            cells: occupied,
+            trusted_cells: trusted,
+            trusted_cell_fraction: ratio(trusted, occupied),
+            masked_cells: masked,
+            ground: measure_ground(looming, current),
+            static_cells,
+            median_abs_d_static_per_s,
+            abs_d_static_histogram,
+            moving_cells: moving,
+            moving_fraction: ratio(moving, trusted),
+            threat_cells: threat,
+            ego_velocity: ego,
+            range_noise_m_per_ring: looming.range_noise_m_per_row.clone(),
+        }
+    }
+}
+
+/// Position of each occupied cell's return (`None` for empty cells).
+fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f64; 3]> {
+    if looming.mask[cell] & mask::EMPTY != 0 {
+        return None;
+    }
+    let index = *looming.image.point.get(cell)?;
+    let p = scan.points_m.get(index as usize)?;
+    Some([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+}
+
+/// Cells that may be ground: an upward normal within `GROUND_MAX_TILT_DEG` of
+/// z, and the return below the sensor.
+fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3])> {
+    let min_cos = GROUND_MAX_TILT_DEG.to_radians().cos();
+    (0..looming.mask.len())
+        .filter_map(|cell| {
+            let p = cell_point(looming, scan, cell)?;
+            let n = looming.normal.get(cell)?;
+            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
+            (upward && p[2] < 0.0).then_some((cell, p))
+        })
+        .collect()
+}
+
+/// Least-squares plane `z = a x + b y + c` through the points.
+fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    let mut v = nalgebra::Vector3::<f64>::zeros();
+    for p in points {
+        let row = nalgebra::Vector3::new(p[0], p[1], 1.0);
+        m += row * row.transpose();
+        v += row * p[2];
+    }
+    let solution = m.try_inverse()? * v;
+    solution
+        .iter()
+        .all(|x| x.is_finite())
+        .then(|| [solution[0], solution[1], solution[2]])
+}
+
+fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
+    let candidates = ground_candidates(looming, scan);
+    let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
+    let Some(height) = median(&mut heights) else {
+        return GroundQuality::default();
+    };
+    let horizontal = |p: &[f64; 3]| p[0].hypot(p[1]);
+    let near_height: Vec<&(usize, [f64; 3])> = candidates
+        .iter()
+        .filter(|(_, p)| {
+            (p[2] - height).abs()
+                <= GROUND_HEIGHT_TOLERANCE_M + GROUND_HEIGHT_TOLERANCE_PER_M * horizontal(p)
+        })
+        .collect();
+    let plane = (near_height.len() >= MIN_PLANE_CELLS)
+        .then(|| fit_plane(&near_height.iter().map(|(_, p)| *p).collect::<Vec<_>>()))
+        .flatten();
+    let ground: Vec<(usize, [f64; 3])> = match plane {
+        Some([a, b, c]) => candidates
+            .iter()
+            .filter(|(_, p)| {
+                (p[2] - (a * p[0] + b * p[1] + c)).abs()
+                    <= GROUND_PLANE_TOLERANCE_M + GROUND_PLANE_TOLERANCE_PER_M * horizontal(p)
+            })
+            .copied()
+            .collect(),
+        None => near_height.into_iter().copied().collect(),
+    };
+    let ego = looming.availability.ego_velocity;
+    let mut abs_fused = Vec::new();
+    let mut sides: [(Vec<f64>, Vec<f64>, u64); 2] = Default::default();
+    let mut trusted_static = 0u64;
+    let mut moving = 0u64;
+    for &(cell, p) in &ground {
+        if looming.mask[cell] != 0 {
+            continue;
+        }
+        let fused = f64::from(looming.fused[cell]);
+        let d = f64::from(looming.disagreement[cell]);
+        if looming.moving[cell] {
+            moving += 1;
+        } else {
+            trusted_static += 1;
+            if fused.is_finite() {
+                abs_fused.push(fused.abs());
+            }
+        }
+        let side = match p[1] {
+            y if y > 0.0 => &mut sides[0],
+            y if y < 0.0 => &mut sides[1],
+            _ => continue,
+        };
+        side.2 += 1;
+        if fused.is_finite() {
+            side.0.push(fused);
+        }
+        if ego && d.is_finite() {
+            side.1.push(d);
+        }
+    }
+    let [left, right] = sides.map(|(mut fused, mut d, cells)| GroundSide {
+        cells,
+        median_fused_per_s: median(&mut fused),
+        median_d_per_s: median(&mut d),
+    });
+    GroundQuality {
+        cells: ground.len() as u64,
+        trusted_static_cells: trusted_static,
+        moving_cells: moving,
+        height_m: Some(height),
+        roll_deg: plane.map(|[_, b, _]| b.atan().to_degrees()),
+        pitch_deg: plane.map(|[a, _, _]| a.atan().to_degrees()),
+        abs_fused_histogram: AbsHistogram::of(abs_fused.iter().copied()),
+        median_abs_fused_per_s: median(&mut abs_fused),
+        left,
+        right,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::beams::BeamTable;
+    use crate::engine::{Availability, ImageGeometry, NO_POINT, RangeImage};
+
+    /// One cell per point (cell i holds point i), on 2 rows.
+    struct Cells {
+        points: Vec<[f32; 3]>,
+        normals: Vec<[f32; 3]>,
+        masks: Vec<u8>,
+        fused: Vec<f32>,
+        d: Vec<f32>,
+        moving: Vec<bool>,
+    }
+
+    impl Cells {
+        fn new() -> Self {
+            Self {
+                points: Vec::new(),
+                normals: Vec::new(),
+                masks: Vec::new(),
+                fused: Vec::new(),
+                d: Vec::new(),
+                moving: Vec::new(),
+            }
+        }
+
+        fn push(&mut self, p: [f32; 3], n: [f32; 3], mask: u8, fused: f32, d: f32) -> usize {
+            self.points.push(p);
+            self.normals.push(n);
+            self.masks.push(mask);
+            self.fused.push(fused);
+            self.d.push(d);
+            self.moving.push(false);
+            self.points.len() - 1
+        }
+
+        fn build(mut self, ego: bool) -> (PairLooming, Scan) {
+            if self.points.len() % 2 == 1 {
+                // Pad to two full rows with an empty cell (no point).
+                self.normals.push([0.0; 3]);
+                self.masks.push(mask::EMPTY);
+                self.fused.push(f32::NAN);
+                self.d.push(f32::NAN);
+                self.moving.push(false);
+            }
+            let cells = self.masks.len();
+            let n_points = self.points.len();
+            let geometry = ImageGeometry {
+                rows: 2,
+                cols: cells / 2,
+                beams: BeamTable::uniform(2, -0.3, 0.0),
+                ring_to_row: None,
+            };
+            let point: Vec<u32> = (0..cells)
+                .map(|c| if c < n_points { c as u32 } else { NO_POINT })
+                .collect();
+            let range_m = (0..cells)
+                .map(|c| {
+                    self.points.get(c).map_or(f32::NAN, |p| {
+                        (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
+                    })
+                })
+                .collect();
+            // An empty-masked cell's point is no cell's surface.
+            let point_surface = (0..n_points)
+                .map(|i| {
+                    if self.masks[i] & mask::EMPTY != 0 {
+                        NO_POINT
+                    } else {
+                        i as u32
+                    }
+                })
+                .collect();
+            let image = RangeImage {
+                range_m,
+                point,
+                point_cell: (0..n_points as u32).collect(),
+                point_surface,
+            };
+            let nan = vec![f32::NAN; cells];
+            let looming = PairLooming {
+                geometry,
+                availability: Availability {
+                    ego_velocity: ego,
+                    rotation_compensated: true,
+                },
+                image,
+                l_lidar: nan.clone(),
+                l_ray_ego: nan.clone(),
+                disagreement: self.d,
+                sigma_per_s: nan.clone(),
+                confidence: nan.clone(),
+                mask: self.masks,
+                disagrees: vec![false; cells],
+                moving: self.moving,
+                fused: self.fused,
+                threat: vec![ThreatLevel::None; cells],
+                incidence_cos: vec![1.0; cells],
+                normal: self.normals,
+                range_noise_m_per_row: vec![0.02, 0.03],
+                dt_s: vec![0.1; cells],
+                l_ego: vec![f32::NAN; n_points],
+                point_threat: vec![ThreatLevel::None; n_points],
+                spheres: None,
+                velocity_mps: None,
+            };
+            let scan = Scan {
+                stamp_ns: 0,
+                frame_id: "lidar".into(),
+                sensor_pose: nalgebra::Isometry3::identity(),
+                points_m: self.points,
+                intensity: None,
+                ring: None,
+                time_offset_s: None,
+                source_index: (0..n_points as u32).collect(),
+                input_point_count: n_points as u32,
+                skipped_invalid_points: 0,
+            };
+            (looming, scan)
+        }
+    }
+
+    const UP: [f32; 3] = [0.0, 0.0, 1.0];
+    const FACING: [f32; 3] = [-1.0, 0.0, 0.0];
+
+    #[test]
+    fn counts_trusted_points_cells_and_masks() {
+        let mut cells = Cells::new();
+        for k in 0..6 {
+            cells.push([10.0, k as f32, 0.5], FACING, 0, 0.1, 0.0);
+        }
+        cells.push([10.0, 7.0, 0.5], FACING, mask::EDGE, 0.1, 0.0);
+        cells.push(
+            [10.0, 8.0, 0.5],
+            FACING,
+            mask::EDGE | mask::OCCLUSION,
+            0.1,
+            0.0,
+        );
+        cells.push([10.0, 9.0, 0.5], FACING, mask::GRAZING, 0.1, 0.0);
+        // A point whose cell is empty of surface (hidden return): not trusted,
+        // its cell not occupied.
+        cells.push([12.0, 9.0, 0.5], FACING, mask::EMPTY, f32::NAN, f32::NAN);
+        let (looming, scan) = cells.build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        assert_eq!(q.points, 10);
+        assert_eq!(q.trusted_points, 6);
+        assert_eq!(q.trusted_fraction, Some(0.6));
+        assert_eq!(q.cells, 9);
+        assert_eq!(q.trusted_cells, 6);
+        assert_eq!(
+            q.masked_cells,
+            MaskCounts {
+                edge: 2,
+                occlusion: 1,
+                grazing: 1,
+                ..MaskCounts::default()
+            }
+        );
+        assert_eq!(q.masked_cells.dominant(), Some(("edge", 2)));
+        assert_eq!(q.static_cells, 6);
+        assert_eq!(q.median_abs_d_static_per_s, Some(0.0));
+        assert_eq!(q.moving_fraction, Some(0.0));
+        assert_eq!(q.range_noise_m_per_ring, vec![0.02, 0.03]);
+        assert_eq!(q.ground.cells, 0);
+        assert_eq!(q.ground.median_abs_fused_per_s, None);
+    }
+
+    #[test]
+    fn without_ego_velocity_there_is_no_d_figure() {
+        let mut cells = Cells::new();
+        cells.push([10.0, 0.0, 0.5], FACING, 0, 0.1, f32::NAN);
+        cells.push([10.0, 1.0, 0.5], FACING, 0, 0.1, f32::NAN);
+        let (looming, scan) = cells.build(false);
+        let q = PairQuality::measure(&looming, &scan);
+        assert!(!q.ego_velocity);
+        assert_eq!(q.median_abs_d_static_per_s, None);
+        assert_eq!(q.abs_d_static_histogram, None);
+    }
+
+    /// A road 1.7 m below the sensor, rising to the left at `slope` (dz/dy),
+    /// 20 cells a side, reading `left` and `right`; plus what is not ground.
+    fn road(slope: f32, left: f32, right: f32) -> Cells {
+        let mut cells = Cells::new();
+        for k in 0..20 {
+            let x = 4.0 + k as f32;
+            for y in [2.5f32, -2.5] {
+                let z = -1.7 + slope * y;
+                let fused = if y > 0.0 { left } else { right };
+                cells.push([x, y, z], UP, 0, fused, fused);
+            }
+        }
+        // Not ground: a car roof (up, 1.5 m above the road), a wall (facing
+        // the sensor), an awning above the sensor (normal down... facing the
+        // sensor: down), a steep bank (normal 30 deg off z).
+        cells.push([8.0, 0.5, -0.2], UP, 0, 0.9, 0.9);
+        cells.push([15.0, 0.0, -1.0], FACING, 0, 0.9, 0.9);
+        cells.push([5.0, 0.0, 2.0], [0.0, 0.0, -1.0], 0, 0.9, 0.9);
+        cells.push([6.0, 3.0, -1.6], [0.0, -0.5, 0.866], 0, 0.9, 0.9);
+        cells
+    }
+
+    #[test]
+    fn classifies_the_ground_and_reads_its_halves() {
+        let (looming, scan) = road(0.0, 0.004, -0.002).build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        let g = &q.ground;
+        assert_eq!(g.cells, 40);
+        assert_eq!(g.trusted_static_cells, 40);
+        assert!((g.height_m.unwrap() + 1.7).abs() < 1e-6);
+        assert!(g.roll_deg.unwrap().abs() < 1e-3);
+        assert!(g.pitch_deg.unwrap().abs() < 1e-3);
+        assert_eq!(g.left.cells, 20);
+        assert_eq!(g.right.cells, 20);
+        assert!((g.left.median_fused_per_s.unwrap() - 0.004).abs() < 1e-6);
+        assert!((g.right.median_fused_per_s.unwrap() + 0.002).abs() < 1e-6);
+        assert!((g.left.median_d_per_s.unwrap() - 0.004).abs() < 1e-6);
+        // |fused| over both halves: 20 x 0.002 and 20 x 0.004.
+        assert!((g.median_abs_fused_per_s.unwrap() - 0.003).abs() < 1e-6);
+        assert_eq!(g.abs_fused_histogram.count(), 40);
+    }
+
+    #[test]
+    fn a_tilted_ground_is_still_ground_and_its_slope_is_measured() {
+        // 3 degrees of roll: the far side 0.13 m off the median height.
+        let slope = 3f32.to_radians().tan();
+        let (looming, scan) = road(slope, 0.03, -0.03).build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        let g = &q.ground;
+        assert_eq!(g.cells, 40);
+        assert!((g.roll_deg.unwrap() - 3.0).abs() < 0.01, "{:?}", g.roll_deg);
+        assert!(g.pitch_deg.unwrap().abs() < 0.01);
+        assert!(g.left.median_fused_per_s.unwrap() > 0.02);
+        assert!(g.right.median_fused_per_s.unwrap() < -0.02);
+    }
+
+    #[test]
+    fn moving_ground_cells_count_in_the_halves_but_not_in_the_static_median() {
+        let mut cells = road(0.0, 0.5, 0.5);
+        for m in cells.moving.iter_mut().take(40) {
+            *m = true;
+        }
+        let (looming, scan) = cells.build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        assert_eq!(q.ground.moving_cells, 40);
+        assert_eq!(q.ground.trusted_static_cells, 0);
+        assert_eq!(q.ground.median_abs_fused_per_s, None);
+        assert_eq!(q.ground.left.median_fused_per_s, Some(0.5));
+        assert_eq!(q.moving_cells, 40);
+    }
+
+    #[test]
+    fn histogram_quantiles_pool_exactly_to_a_bin() {
+        let mut a = AbsHistogram::of([0.001, 0.002, 0.003].into_iter());
+        let b = AbsHistogram::of([0.004, 0.005, -0.006, f64::NAN].into_iter());
+        a.merge(&b);
+        assert_eq!(a.count(), 6);
+        let median = a.quantile(0.5).unwrap();
+        assert!((median / 0.003 - 1.0).abs() < 0.025, "{median}");
+        assert_eq!(AbsHistogram::default().quantile(0.5), None);
+        assert_eq!(AbsHistogram::of([0.0].into_iter()).quantile(0.5), Some(0.0));
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&mut []), None);
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), Some(2.5));
+    }
+}
