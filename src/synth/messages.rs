@@ -455,7 +455,10 @@ fn lidar_cloud(world: &World, scan: &SimScan, shape: &CloudShape) -> PointCloud2
         }
         CloudLayout::RingField(field) => {
             intensity = packer.add("intensity", datatype::FLOAT32);
-            ring = Some((packer.add(field.name.as_str(), field.datatype), field.datatype));
+            ring = Some((
+                packer.add(field.name.as_str(), field.datatype),
+                field.datatype,
+            ));
             time_s = Some(packer.add("time", datatype::FLOAT32));
         }
         _ => intensity = packer.add("intensity", datatype::FLOAT32),

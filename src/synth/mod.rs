@@ -17,8 +17,8 @@ use std::time::Instant;
 
 use crate::output::{OutputError, OutputOptions, OutputWriter, check_overwrite};
 
-pub use messages::{START_NS, topics};
 pub use messages::{CloudShape, NO_RETURN_SURFACE, Slot};
+pub use messages::{START_NS, topics};
 pub use scene::{CloudLayout, Realism, Scenario, ScenarioError};
 pub use truth::{TruthEvent, TruthScan};
 

@@ -736,6 +736,53 @@ mod tests {
     }
 
     #[test]
+    fn layouts_and_realism_parse_and_stay_out_of_the_json_when_default() {
+        for name in LAYOUT_NAMES {
+            let layout: CloudLayout = name.parse().unwrap();
+            assert_eq!(&layout.to_string(), name);
+        }
+        assert_eq!(
+            "ring-field:channel:uint8".parse::<CloudLayout>().unwrap(),
+            CloudLayout::RingField(RingField {
+                name: RingFieldName::Channel,
+                datatype: 2
+            })
+        );
+        assert!("ring-field:ringo".parse::<CloudLayout>().is_err());
+        assert!("columnar".parse::<CloudLayout>().is_err());
+        let minimal = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}}"#;
+        let scenario = parse("x", minimal).unwrap();
+        let json = serde_json::to_string(&scenario).unwrap();
+        assert!(
+            !json.contains("layout") && !json.contains("realism"),
+            "{json}"
+        );
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]},
+            "lidar": {"layout": "organized", "realism": "hdl64e"}}"#;
+        let scenario = parse("x", text).unwrap();
+        assert_eq!(scenario.lidar.layout, CloudLayout::Organized);
+        assert_eq!(scenario.lidar.realism, Realism::hdl64e());
+        // What is written back reads the same.
+        let again: Scenario =
+            serde_json::from_str(&serde_json::to_string(&scenario).unwrap()).unwrap();
+        assert_eq!(again, scenario);
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]},
+            "lidar": {"realism": {"off_axis": true, "speck_fraction": 0.001}}}"#;
+        let realism = parse("x", text).unwrap().lidar.realism;
+        assert!(realism.off_axis && !realism.azimuth_offsets && realism.speck_fraction == 0.001);
+        for bad in [
+            r#"{"layout": "sideways"}"#,
+            r#"{"realism": "hdl32e"}"#,
+            r#"{"realism": {"offaxis": true}}"#,
+            r#"{"realism": {"dropout_fraction": 0.9}}"#,
+        ] {
+            let text =
+                format!(r#"{{"name": "x", "ego": {{"speed_mps": [[0, 1]]}}, "lidar": {bad}}}"#);
+            assert!(parse("x", &text).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
     fn bad_actor_motion_is_refused() {
         let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}, "actors": [{"id": 1}]}"#;
         assert!(matches!(

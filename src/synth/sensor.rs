@@ -425,7 +425,8 @@ impl World {
             seed ^ 0x5EC5_D809 ^ index.wrapping_mul(0xC2B2_AE3D_27D4_EB4F),
         );
         points.retain_mut(|point| {
-            let (lost, speck_draw, at): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+            let (lost, speck_draw, at): (f64, f64, f64) =
+                (rng.random(), rng.random(), rng.random());
             let lost_probability =
                 dropout * (1.0 + 3.0 * (point.truth.range_m / max_range_m).min(1.0));
             if lost < lost_probability {
@@ -485,9 +486,17 @@ pub fn calibrate(lidar: &super::scene::LidarSpec) -> Vec<Laser> {
     use rand::Rng;
     let realism: &Realism = &lidar.realism;
     let elevations = if realism.irregular_elevations {
-        two_block_elevations_rad(lidar.beams, lidar.elevation_min_deg, lidar.elevation_max_deg)
+        two_block_elevations_rad(
+            lidar.beams,
+            lidar.elevation_min_deg,
+            lidar.elevation_max_deg,
+        )
     } else {
-        beam_elevations_rad(lidar.beams, lidar.elevation_min_deg, lidar.elevation_max_deg)
+        beam_elevations_rad(
+            lidar.beams,
+            lidar.elevation_min_deg,
+            lidar.elevation_max_deg,
+        )
     };
     let beams = elevations.len();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(CALIBRATION_SEED);
