@@ -187,6 +187,11 @@ struct SynthArgs {
     /// LiDAR columns per revolution [default: the scenario's, 2048].
     #[arg(long)]
     columns: Option<u32>,
+    /// Layout of the LiDAR cloud: ring-time, organized, ring-field:channel,
+    /// ring-field:laser_id[:int32], ring-field:line, laser-order[:kitti],
+    /// firing-order, firing-order-sparse [default: the scenario's, ring-time].
+    #[arg(long, value_name = "NAME", value_parser = clap::value_parser!(looming::synth::CloudLayout))]
+    layout: Option<looming::synth::CloudLayout>,
     /// zstd level of the output chunks (1-22; higher is smaller and slower)
     /// [default: 3].
     #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]
@@ -509,7 +514,11 @@ fn synth(args: SynthArgs) -> Result<(), Failure> {
             ..OutputOptions::default()
         },
     };
-    let summary = looming::synth::synthesize(&options).map_err(|error| {
+    let lidar = looming::synth::LidarOverrides {
+        layout: args.layout,
+        realism: None,
+    };
+    let summary = looming::synth::synthesize_with(&options, &lidar).map_err(|error| {
         let usage = matches!(
             &error,
             looming::synth::SynthError::Scenario(_)

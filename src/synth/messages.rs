@@ -13,8 +13,8 @@ use crate::ros::msgs::{
 };
 use crate::ros_schemas::{self, RosDialect};
 
-use super::scene::Scenario;
-use super::sensor::{SimScan, World};
+use super::scene::{CloudLayout, LaserOrder, Scenario};
+use super::sensor::{SimPoint, SimScan, World};
 use super::truth::{TruthEvent, TruthScan};
 
 /// Wall-clock time of the start of every synthetic drive (fixed, so the same
@@ -224,15 +224,16 @@ impl SynthLog {
         let sweep_end_s = scan.stamp_s + world.period_s;
         self.encode_motion_until(world, sweep_end_s, seed);
         let log_time_ns = stamp_ns(sweep_end_s);
+        let shape = CloudShape::new(world, scan);
         self.push(
             self.channels.lidar,
             log_time_ns,
-            lidar_cloud(scan).encode_cdr(false),
+            lidar_cloud(world, scan, &shape).encode_cdr(false),
         );
         self.push(
             self.channels.truth_points,
             log_time_ns,
-            truth_cloud(scan).encode_cdr(false),
+            truth_cloud(scan, &shape).encode_cdr(false),
         );
         let truth = serde_json::to_vec(&TruthScan::new(world, scan)).expect("truth serialises");
         self.push(self.channels.truth_scan, log_time_ns, truth);
@@ -276,7 +277,255 @@ impl SynthLog {
     }
 }
 
-fn lidar_cloud(scan: &SimScan) -> PointCloud2<'static> {
+/// One point of a written cloud: a return, or a pixel without one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Slot {
+    /// Index into the scan's points.
+    Return(u32),
+    /// No return from this beam and column (dense layouts only).
+    Empty { ring: u16, column: u32 },
+}
+
+/// Which point goes where in a written cloud (and in its `/truth/points`).
+#[derive(Debug, Clone)]
+pub struct CloudShape {
+    pub height: u32,
+    pub width: u32,
+    /// Row by row.
+    pub slots: Vec<Slot>,
+}
+
+impl CloudShape {
+    pub fn new(world: &World, scan: &SimScan) -> Self {
+        let beams = world.lasers.len();
+        let columns = world.scenario.lidar.columns as usize;
+        let returns = || (0..scan.points.len() as u32).map(Slot::Return);
+        let unorganized = |slots: Vec<Slot>| Self {
+            height: 1,
+            width: slots.len() as u32,
+            slots,
+        };
+        // A beams x columns grid, the pixel of (ring, column) at `at(ring, column)`.
+        let grid = |at: &dyn Fn(usize, usize) -> usize| {
+            let mut slots = vec![Slot::Return(0); beams * columns];
+            for ring in 0..beams {
+                for column in 0..columns {
+                    slots[at(ring, column)] = Slot::Empty {
+                        ring: ring as u16,
+                        column: column as u32,
+                    };
+                }
+            }
+            for (i, p) in scan.points.iter().enumerate() {
+                slots[at(usize::from(p.ring), p.column as usize)] = Slot::Return(i as u32);
+            }
+            slots
+        };
+        match world.scenario.lidar.layout {
+            CloudLayout::RingTime
+            | CloudLayout::RingField(_)
+            | CloudLayout::FiringOrder { sparse: true } => unorganized(returns().collect()),
+            CloudLayout::LaserOrder(order) => {
+                let mut slots: Vec<Slot> = returns().collect();
+                let key = |slot: &Slot| {
+                    let Slot::Return(i) = *slot else {
+                        return (0, 0);
+                    };
+                    let p = &scan.points[i as usize];
+                    match order {
+                        // Points are in firing order already: a stable sort by ring.
+                        LaserOrder::LowestFirst => (usize::from(p.ring), 0),
+                        // Top laser first; counter-clockwise from straight
+                        // ahead (column columns/2) is decreasing column.
+                        LaserOrder::Kitti => (
+                            beams - 1 - usize::from(p.ring),
+                            (columns + columns / 2 - p.column as usize) % columns,
+                        ),
+                    }
+                };
+                slots.sort_by_key(key);
+                unorganized(slots)
+            }
+            CloudLayout::Organized => Self {
+                height: beams as u32,
+                width: columns as u32,
+                slots: grid(&|ring, column| (beams - 1 - ring) * columns + column),
+            },
+            CloudLayout::FiringOrder { sparse: false } => {
+                unorganized(grid(&|ring, column| column * beams + ring))
+            }
+        }
+    }
+
+    fn point<'s>(&self, scan: &'s SimScan, slot: Slot) -> Option<&'s SimPoint> {
+        match slot {
+            Slot::Return(i) => scan.points.get(i as usize),
+            Slot::Empty { .. } => None,
+        }
+    }
+
+    fn dense(&self) -> bool {
+        self.slots.iter().all(|s| matches!(s, Slot::Return(_)))
+    }
+}
+
+/// Builds a point layout field by field (each field aligned to its size).
+struct Packer {
+    fields: Vec<PointField>,
+    step: u32,
+}
+
+impl Packer {
+    fn new() -> Self {
+        Self {
+            fields: Vec::new(),
+            step: 0,
+        }
+    }
+
+    /// Add a field; its offset.
+    fn add(&mut self, name: &str, datatype: u8) -> usize {
+        let size = datatype_size(datatype);
+        self.at(name, self.step.div_ceil(size) * size, datatype)
+    }
+
+    /// Add a field at a fixed offset; its offset.
+    fn at(&mut self, name: &str, offset: u32, datatype: u8) -> usize {
+        self.fields.push(PointField::new(name, offset, datatype));
+        self.step = self.step.max(offset + datatype_size(datatype));
+        offset as usize
+    }
+
+    /// The point step, a multiple of 4 bytes, or `step` if larger.
+    fn point_step(&self, step: u32) -> u32 {
+        (self.step.div_ceil(4) * 4).max(step)
+    }
+}
+
+fn datatype_size(datatype: u8) -> u32 {
+    match datatype {
+        datatype::INT8 | datatype::UINT8 => 1,
+        datatype::INT16 | datatype::UINT16 => 2,
+        datatype::FLOAT64 => 8,
+        _ => 4,
+    }
+}
+
+/// Write `value` at `offset` as `datatype` (integers saturate).
+fn put(out: &mut [u8], offset: usize, datatype: u8, value: f64) {
+    let mut bytes = |b: &[u8]| out[offset..offset + b.len()].copy_from_slice(b);
+    match datatype {
+        datatype::INT8 => bytes(&(value as i8).to_le_bytes()),
+        datatype::UINT8 => bytes(&(value as u8).to_le_bytes()),
+        datatype::INT16 => bytes(&(value as i16).to_le_bytes()),
+        datatype::UINT16 => bytes(&(value as u16).to_le_bytes()),
+        datatype::INT32 => bytes(&(value as i32).to_le_bytes()),
+        datatype::UINT32 => bytes(&(value as u32).to_le_bytes()),
+        datatype::FLOAT64 => bytes(&value.to_le_bytes()),
+        _ => bytes(&(value as f32).to_le_bytes()),
+    }
+}
+
+fn put_f32(out: &mut [u8], offset: usize, value: f32) {
+    out[offset..offset + 4].copy_from_slice(&value.to_le_bytes());
+}
+
+/// `/lidar/points` in the scenario's layout.
+fn lidar_cloud(world: &World, scan: &SimScan, shape: &CloudShape) -> PointCloud2<'static> {
+    let layout = world.scenario.lidar.layout;
+    if layout == CloudLayout::RingTime {
+        return ring_time_cloud(scan);
+    }
+    let mut packer = Packer::new();
+    let [x, y, z] = ["x", "y", "z"].map(|name| packer.add(name, datatype::FLOAT32));
+    let mut step = 0;
+    let intensity;
+    let (mut ring, mut time_s, mut time_ns, mut reflectivity, mut range_mm) =
+        (None, None, None, None, None);
+    match layout {
+        CloudLayout::Organized => {
+            // The Ouster ROS driver's point (legacy profile), 48 bytes.
+            intensity = packer.at("intensity", 16, datatype::FLOAT32);
+            time_ns = Some(packer.at("t", 20, datatype::UINT32));
+            reflectivity = Some(packer.at("reflectivity", 24, datatype::UINT16));
+            ring = Some((packer.at("ring", 26, datatype::UINT16), datatype::UINT16));
+            packer.at("ambient", 28, datatype::UINT16);
+            range_mm = Some(packer.at("range", 32, datatype::UINT32));
+            step = 48;
+        }
+        CloudLayout::RingField(field) => {
+            intensity = packer.add("intensity", datatype::FLOAT32);
+            ring = Some((
+                packer.add(field.name.as_str(), field.datatype),
+                field.datatype,
+            ));
+            time_s = Some(packer.add("time", datatype::FLOAT32));
+        }
+        _ => intensity = packer.add("intensity", datatype::FLOAT32),
+    }
+    let point_step = packer.point_step(step);
+    let ps = point_step as usize;
+    let beams = world.lasers.len();
+    let mut data = vec![0u8; shape.slots.len() * ps];
+    for (&slot, out) in shape.slots.iter().zip(data.chunks_exact_mut(ps)) {
+        let (ring_index, column) = match (slot, shape.point(scan, slot)) {
+            (_, Some(p)) => (p.ring, p.column),
+            (Slot::Empty { ring, column }, None) => (ring, column),
+            (Slot::Return(_), None) => (0, 0),
+        };
+        let point = shape.point(scan, slot);
+        let xyz = point.map_or([f32::NAN; 3], |p| p.point_m);
+        for (offset, value) in [x, y, z].into_iter().zip(xyz) {
+            put_f32(out, offset, value);
+        }
+        put_f32(out, intensity, point.map_or(0.0, |p| p.intensity));
+        if let Some((offset, datatype)) = ring {
+            // Ouster numbers rows from the top beam, Velodyne rings from the lowest.
+            let value = if layout == CloudLayout::Organized {
+                beams - 1 - usize::from(ring_index)
+            } else {
+                usize::from(ring_index)
+            };
+            put(out, offset, datatype, value as f64);
+        }
+        let column_time_s = world.column_time_s(column);
+        if let Some(offset) = time_s {
+            put_f32(out, offset, column_time_s as f32);
+        }
+        if let Some(offset) = time_ns {
+            put(out, offset, datatype::UINT32, (column_time_s * 1e9).round());
+        }
+        if let Some(offset) = reflectivity {
+            put(
+                out,
+                offset,
+                datatype::UINT16,
+                point.map_or(0.0, |p| f64::from(p.intensity).round()),
+            );
+        }
+        if let Some(offset) = range_mm {
+            let range_m = point.map_or(0.0, |p| {
+                let [x, y, z] = p.point_m.map(f64::from);
+                (x * x + y * y + z * z).sqrt()
+            });
+            put(out, offset, datatype::UINT32, (range_m * 1000.0).round());
+        }
+    }
+    PointCloud2 {
+        header: Header::new(stamp_ns(scan.stamp_s), LIDAR_FRAME),
+        height: shape.height,
+        width: shape.width,
+        fields: packer.fields,
+        is_bigendian: false,
+        point_step,
+        row_step: shape.width * point_step,
+        data: data.into(),
+        is_dense: shape.dense(),
+    }
+}
+
+/// The Velodyne-driver cloud of `ring-time` (as before layouts existed).
+fn ring_time_cloud(scan: &SimScan) -> PointCloud2<'static> {
     let points: Vec<[f32; 3]> = scan.points.iter().map(|p| p.point_m).collect();
     let intensity: Vec<f32> = scan.points.iter().map(|p| p.intensity).collect();
     let ring: Vec<u16> = scan.points.iter().map(|p| p.ring).collect();
@@ -294,7 +543,10 @@ fn lidar_cloud(scan: &SimScan) -> PointCloud2<'static> {
 /// Field layout of `/truth/points` (one point per `/lidar/points` point, same order).
 const TRUTH_POINT_STEP: u32 = 28;
 
-fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
+/// `surface` of a `/truth/points` entry for a pixel without a return.
+pub const NO_RETURN_SURFACE: u8 = 255;
+
+fn truth_cloud(scan: &SimScan, shape: &CloudShape) -> PointCloud2<'static> {
     // No x, y, z: the noise-free point is `range` along the measured point's
     // direction, and leaving them out keeps the sample logs small.
     let fields = vec![
@@ -307,8 +559,17 @@ fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
         PointField::new("surface", 24, datatype::UINT8),
         PointField::new("moving", 25, datatype::UINT8),
     ];
-    let mut data = Vec::with_capacity(scan.points.len() * TRUTH_POINT_STEP as usize);
-    for point in &scan.points {
+    let mut data = Vec::with_capacity(shape.slots.len() * TRUTH_POINT_STEP as usize);
+    for &slot in &shape.slots {
+        let Some(point) = shape.point(scan, slot) else {
+            // A pixel without a return: NaN values, object 0, surface 255.
+            for _ in 0..5 {
+                data.extend_from_slice(&f32::NAN.to_le_bytes());
+            }
+            data.extend_from_slice(&0u32.to_le_bytes());
+            data.extend_from_slice(&[NO_RETURN_SURFACE, 0, 0, 0]);
+            continue;
+        };
         let truth = &point.truth;
         data.extend_from_slice(&(truth.range_m as f32).to_le_bytes());
         data.extend_from_slice(&(truth.point_looming_per_s as f32).to_le_bytes());
@@ -320,17 +581,16 @@ fn truth_cloud(scan: &SimScan) -> PointCloud2<'static> {
         data.push(u8::from(truth.moving));
         data.extend_from_slice(&[0, 0]);
     }
-    let width = scan.points.len() as u32;
     PointCloud2 {
         header: Header::new(stamp_ns(scan.stamp_s), LIDAR_FRAME),
-        height: 1,
-        width,
+        height: shape.height,
+        width: shape.width,
         fields,
         is_bigendian: false,
         point_step: TRUTH_POINT_STEP,
-        row_step: width * TRUTH_POINT_STEP,
+        row_step: shape.width * TRUTH_POINT_STEP,
         data: data.into(),
-        is_dense: true,
+        is_dense: shape.dense(),
     }
 }
 

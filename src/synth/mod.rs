@@ -17,8 +17,9 @@ use std::time::Instant;
 
 use crate::output::{OutputError, OutputOptions, OutputWriter, check_overwrite};
 
+pub use messages::{CloudShape, NO_RETURN_SURFACE, Slot};
 pub use messages::{START_NS, topics};
-pub use scene::{Scenario, ScenarioError};
+pub use scene::{CloudLayout, Realism, Scenario, ScenarioError};
 pub use truth::{TruthEvent, TruthScan};
 
 /// What `looming synth` was asked for.
@@ -34,6 +35,13 @@ pub struct SynthOptions {
     pub beams: Option<u16>,
     pub columns: Option<u32>,
     pub output_options: OutputOptions,
+}
+
+/// Overrides of the scenario's LiDAR beyond [`SynthOptions`] (`--layout`).
+#[derive(Debug, Clone, Default)]
+pub struct LidarOverrides {
+    pub layout: Option<CloudLayout>,
+    pub realism: Option<Realism>,
 }
 
 /// What a synth run made.
@@ -61,7 +69,21 @@ pub enum SynthError {
 
 /// The scenario with the command-line overrides applied, validated.
 pub fn resolve_scenario(options: &SynthOptions) -> Result<Scenario, SynthError> {
+    resolve_scenario_with(options, &LidarOverrides::default())
+}
+
+/// [`resolve_scenario`] with the LiDAR overrides too.
+pub fn resolve_scenario_with(
+    options: &SynthOptions,
+    lidar: &LidarOverrides,
+) -> Result<Scenario, SynthError> {
     let mut scenario = scene::load(&options.scenario)?;
+    if let Some(layout) = lidar.layout {
+        scenario.lidar.layout = layout;
+    }
+    if let Some(realism) = &lidar.realism {
+        scenario.lidar.realism = realism.clone();
+    }
     if let Some(duration_s) = options.duration_s {
         scenario.duration_s = duration_s;
     }
@@ -89,8 +111,16 @@ pub fn resolve_scenario(options: &SynthOptions) -> Result<Scenario, SynthError> 
 
 /// Simulate the scenario and write the MCAP.
 pub fn synthesize(options: &SynthOptions) -> Result<SynthSummary, SynthError> {
+    synthesize_with(options, &LidarOverrides::default())
+}
+
+/// [`synthesize`] with the LiDAR overrides too.
+pub fn synthesize_with(
+    options: &SynthOptions,
+    lidar: &LidarOverrides,
+) -> Result<SynthSummary, SynthError> {
     let started = Instant::now();
-    let scenario = resolve_scenario(options)?;
+    let scenario = resolve_scenario_with(options, lidar)?;
     check_overwrite(&options.output, options.output_options.force)?;
     let output_options = OutputOptions {
         profile: "ros2".into(),

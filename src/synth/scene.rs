@@ -136,6 +136,277 @@ pub struct LidarSpec {
     /// roll, pitch, yaw (degrees, applied as yaw * pitch * roll).
     pub mount_xyz_m: [f64; 3],
     pub mount_rpy_deg: [f64; 3],
+    /// How the cloud is written (docs/scenarios.md, "Cloud layouts").
+    #[serde(skip_serializing_if = "is_default")]
+    pub layout: CloudLayout,
+    /// Sensor imperfections (docs/scenarios.md, "Sensor realism"): `"ideal"`,
+    /// `"hdl64e"` or an object of the separate options.
+    #[serde(skip_serializing_if = "is_default")]
+    pub realism: Realism,
+}
+
+fn is_default<T: Default + PartialEq>(value: &T) -> bool {
+    *value == T::default()
+}
+
+/// What the `/lidar/points` cloud looks like: the layouts real drivers write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum CloudLayout {
+    /// Velodyne driver: x, y, z, intensity, `ring` (UINT16), `time` (FLOAT32 s),
+    /// unorganized, returns only, in firing order.
+    #[default]
+    RingTime,
+    /// Ouster driver: height = beams (top beam first), width = columns, a
+    /// no-return pixel has NaN x, y, z; fields x, y, z, intensity, `t` (UINT32 ns),
+    /// `reflectivity` (UINT16), `ring` (UINT16, = row), `ambient` (UINT16),
+    /// `range` (UINT32 mm).
+    Organized,
+    /// As `RingTime`, with the ring under another name and type.
+    RingField(RingField),
+    /// KITTI `.bin` content: x, y, z, intensity only, laser by laser.
+    LaserOrder(LaserOrder),
+    /// x, y, z, intensity only, in firing order (column by column); `sparse`
+    /// drops the no-return points, otherwise they are kept as NaN.
+    FiringOrder { sparse: bool },
+}
+
+/// The ring field of a `ring-field:NAME[:TYPE]` layout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RingField {
+    pub name: RingFieldName,
+    /// A `sensor_msgs/PointField` datatype: UINT8, UINT16 or INT32.
+    pub datatype: u8,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RingFieldName {
+    Channel,
+    LaserId,
+    Line,
+}
+
+impl RingFieldName {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Channel => "channel",
+            Self::LaserId => "laser_id",
+            Self::Line => "line",
+        }
+    }
+}
+
+/// The order of a `laser-order` cloud.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LaserOrder {
+    /// Lowest laser (ring 0) first, each laser's points in firing order
+    /// (clockwise from behind).
+    LowestFirst,
+    /// As KITTI lists them: top laser first, each laser's points
+    /// counter-clockwise from straight ahead.
+    Kitti,
+}
+
+/// Every layout name `--layout` and `lidar.layout` accept.
+pub const LAYOUT_NAMES: &[&str] = &[
+    "ring-time",
+    "organized",
+    "ring-field:channel",
+    "ring-field:laser_id",
+    "ring-field:laser_id:int32",
+    "ring-field:line",
+    "laser-order",
+    "laser-order:kitti",
+    "firing-order",
+    "firing-order-sparse",
+];
+
+const UINT8: u8 = 2;
+const UINT16: u8 = 4;
+const INT32: u8 = 5;
+
+impl std::fmt::Display for CloudLayout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::RingTime => f.write_str("ring-time"),
+            Self::Organized => f.write_str("organized"),
+            Self::RingField(field) => {
+                let default = RingField::named(field.name).datatype;
+                write!(f, "ring-field:{}", field.name.as_str())?;
+                if field.datatype != default {
+                    let name = match field.datatype {
+                        UINT8 => "uint8",
+                        UINT16 => "uint16",
+                        _ => "int32",
+                    };
+                    write!(f, ":{name}")?;
+                }
+                Ok(())
+            }
+            Self::LaserOrder(LaserOrder::LowestFirst) => f.write_str("laser-order"),
+            Self::LaserOrder(LaserOrder::Kitti) => f.write_str("laser-order:kitti"),
+            Self::FiringOrder { sparse: false } => f.write_str("firing-order"),
+            Self::FiringOrder { sparse: true } => f.write_str("firing-order-sparse"),
+        }
+    }
+}
+
+impl RingField {
+    /// The name with its usual type: `channel` UINT16, `laser_id` and `line` UINT8.
+    pub fn named(name: RingFieldName) -> Self {
+        let datatype = match name {
+            RingFieldName::Channel => UINT16,
+            RingFieldName::LaserId | RingFieldName::Line => UINT8,
+        };
+        Self { name, datatype }
+    }
+}
+
+impl std::str::FromStr for CloudLayout {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let unknown = || {
+            format!(
+                "unknown LiDAR layout `{text}`; layouts: {} (a ring field may add :uint8, :uint16 or :int32)",
+                LAYOUT_NAMES.join(", ")
+            )
+        };
+        Ok(match text {
+            "ring-time" => Self::RingTime,
+            "organized" => Self::Organized,
+            "laser-order" => Self::LaserOrder(LaserOrder::LowestFirst),
+            "laser-order:kitti" => Self::LaserOrder(LaserOrder::Kitti),
+            "firing-order" => Self::FiringOrder { sparse: false },
+            "firing-order-sparse" => Self::FiringOrder { sparse: true },
+            _ => {
+                let rest = text.strip_prefix("ring-field:").ok_or_else(unknown)?;
+                let (name, datatype) = rest.split_once(':').unwrap_or((rest, ""));
+                let name = match name {
+                    "channel" => RingFieldName::Channel,
+                    "laser_id" => RingFieldName::LaserId,
+                    "line" => RingFieldName::Line,
+                    _ => return Err(unknown()),
+                };
+                let mut field = RingField::named(name);
+                field.datatype = match datatype {
+                    "" => field.datatype,
+                    "uint8" => UINT8,
+                    "uint16" => UINT16,
+                    "int32" => INT32,
+                    _ => return Err(unknown()),
+                };
+                Self::RingField(field)
+            }
+        })
+    }
+}
+
+impl TryFrom<String> for CloudLayout {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, String> {
+        text.parse()
+    }
+}
+
+impl From<CloudLayout> for String {
+    fn from(layout: CloudLayout) -> Self {
+        layout.to_string()
+    }
+}
+
+/// Sensor imperfections, each off by default (`"ideal"`). `"hdl64e"` turns
+/// all of them on with HDL-64E-like magnitudes. They combine with any layout.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(try_from = "RealismRepr")]
+pub struct Realism {
+    /// Two blocks of lasers with different spacings (HDL-64E: 32 lasers from
+    /// -24.8 to -8.8 deg, 32 from -8.5 to +2 deg), each laser a little off.
+    pub irregular_elevations: bool,
+    /// Lasers mounted off the rotation axis: 0.13-0.21 m above the frame
+    /// origin and +-2.6 cm sideways, rotating with the head.
+    pub off_axis: bool,
+    /// Per-laser rotational corrections up to +-5 deg.
+    pub azimuth_offsets: bool,
+    /// Per-laser range biases (+-2 cm) and an intensity-dependent range error
+    /// (weak returns read up to 4 cm long).
+    pub range_bias: bool,
+    /// Fraction of returns lost at random at short range; it grows to 4 times
+    /// this at `max_range_m`.
+    pub dropout_fraction: f64,
+    /// Fraction of returns replaced by a speck (rain, dust) at a random short range.
+    pub speck_fraction: f64,
+}
+
+impl Realism {
+    pub fn hdl64e() -> Self {
+        Self {
+            irregular_elevations: true,
+            off_axis: true,
+            azimuth_offsets: true,
+            range_bias: true,
+            dropout_fraction: 0.015,
+            speck_fraction: 0.0005,
+        }
+    }
+}
+
+/// `"ideal"`, `"hdl64e"` or the fields.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RealismRepr {
+    Preset(String),
+    Fields(RealismFields),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RealismFields {
+    #[serde(default)]
+    irregular_elevations: bool,
+    #[serde(default)]
+    off_axis: bool,
+    #[serde(default)]
+    azimuth_offsets: bool,
+    #[serde(default)]
+    range_bias: bool,
+    #[serde(default)]
+    dropout_fraction: f64,
+    #[serde(default)]
+    speck_fraction: f64,
+}
+
+impl TryFrom<RealismRepr> for Realism {
+    type Error = String;
+
+    fn try_from(repr: RealismRepr) -> Result<Self, String> {
+        match repr {
+            RealismRepr::Preset(name) => name.parse(),
+            RealismRepr::Fields(f) => Ok(Self {
+                irregular_elevations: f.irregular_elevations,
+                off_axis: f.off_axis,
+                azimuth_offsets: f.azimuth_offsets,
+                range_bias: f.range_bias,
+                dropout_fraction: f.dropout_fraction,
+                speck_fraction: f.speck_fraction,
+            }),
+        }
+    }
+}
+
+impl std::str::FromStr for Realism {
+    type Err = String;
+
+    fn from_str(name: &str) -> Result<Self, String> {
+        match name {
+            "ideal" => Ok(Self::default()),
+            "hdl64e" => Ok(Self::hdl64e()),
+            _ => Err(format!(
+                "unknown realism `{name}`: \"ideal\", \"hdl64e\" or an object of options"
+            )),
+        }
+    }
 }
 
 impl Default for LidarSpec {
@@ -152,6 +423,8 @@ impl Default for LidarSpec {
             // so the extrinsic and lever-arm path is exercised.
             mount_xyz_m: [0.8, 0.1, 0.9],
             mount_rpy_deg: [0.0, -1.5, 4.0],
+            layout: CloudLayout::RingTime,
+            realism: Realism::default(),
         }
     }
 }
@@ -308,6 +581,17 @@ impl Scenario {
                 "lidar.elevation_min_deg must be below elevation_max_deg".into(),
             ));
         }
+        let realism = &self.lidar.realism;
+        for (value, what) in [
+            (realism.dropout_fraction, "dropout_fraction"),
+            (realism.speck_fraction, "speck_fraction"),
+        ] {
+            if !(0.0..=0.25).contains(&value) {
+                return Err(invalid(format!(
+                    "lidar.realism.{what} must be within 0 to 0.25, got {value}"
+                )));
+            }
+        }
         if self.ego.speed_mps.is_empty() {
             return Err(invalid(
                 "ego.speed_mps needs at least one [time_s, value] knot".into(),
@@ -449,6 +733,53 @@ mod tests {
         assert_eq!(profile_at(&profile, 5.0), 20.0);
         assert_eq!(profile_slope_at(&profile, 2.0), 5.0);
         assert_eq!(profile_slope_at(&profile, 4.0), 0.0);
+    }
+
+    #[test]
+    fn layouts_and_realism_parse_and_stay_out_of_the_json_when_default() {
+        for name in LAYOUT_NAMES {
+            let layout: CloudLayout = name.parse().unwrap();
+            assert_eq!(&layout.to_string(), name);
+        }
+        assert_eq!(
+            "ring-field:channel:uint8".parse::<CloudLayout>().unwrap(),
+            CloudLayout::RingField(RingField {
+                name: RingFieldName::Channel,
+                datatype: 2
+            })
+        );
+        assert!("ring-field:ringo".parse::<CloudLayout>().is_err());
+        assert!("columnar".parse::<CloudLayout>().is_err());
+        let minimal = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}}"#;
+        let scenario = parse("x", minimal).unwrap();
+        let json = serde_json::to_string(&scenario).unwrap();
+        assert!(
+            !json.contains("layout") && !json.contains("realism"),
+            "{json}"
+        );
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]},
+            "lidar": {"layout": "organized", "realism": "hdl64e"}}"#;
+        let scenario = parse("x", text).unwrap();
+        assert_eq!(scenario.lidar.layout, CloudLayout::Organized);
+        assert_eq!(scenario.lidar.realism, Realism::hdl64e());
+        // What is written back reads the same.
+        let again: Scenario =
+            serde_json::from_str(&serde_json::to_string(&scenario).unwrap()).unwrap();
+        assert_eq!(again, scenario);
+        let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]},
+            "lidar": {"realism": {"off_axis": true, "speck_fraction": 0.001}}}"#;
+        let realism = parse("x", text).unwrap().lidar.realism;
+        assert!(realism.off_axis && !realism.azimuth_offsets && realism.speck_fraction == 0.001);
+        for bad in [
+            r#"{"layout": "sideways"}"#,
+            r#"{"realism": "hdl32e"}"#,
+            r#"{"realism": {"offaxis": true}}"#,
+            r#"{"realism": {"dropout_fraction": 0.9}}"#,
+        ] {
+            let text =
+                format!(r#"{{"name": "x", "ego": {{"speed_mps": [[0, 1]]}}, "lidar": {bad}}}"#);
+            assert!(parse("x", &text).is_err(), "{bad}");
+        }
     }
 
     #[test]
