@@ -514,6 +514,7 @@ mod tests {
                 cols: cells / 2,
                 beams: BeamTable::uniform(2, -0.3, 0.0),
                 ring_to_row: None,
+                parallax_rad_m: None,
             };
             let point: Vec<u32> = (0..cells)
                 .map(|c| if c < n_points { c as u32 } else { NO_POINT })
@@ -567,6 +568,8 @@ mod tests {
                 point_threat: vec![ThreatLevel::None; n_points],
                 spheres: None,
                 velocity_mps: None,
+                angular_velocity_radps: None,
+                ego_estimate: None,
             };
             let scan = Scan {
                 stamp_ns: 0,
@@ -579,6 +582,8 @@ mod tests {
                 source_index: (0..n_points as u32).collect(),
                 input_point_count: n_points as u32,
                 skipped_invalid_points: 0,
+                organized: None,
+                layout: Default::default(),
             };
             (looming, scan)
         }

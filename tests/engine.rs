@@ -21,8 +21,10 @@ fn eval_scenario_at(
     beams: u16,
     columns: u32,
 ) -> EvalReport {
+    // The resolution is in the name: tests at 32 x 512 and 64 x 2048 of the
+    // same scenario run in parallel and must not share a folder.
     let dir = std::env::temp_dir().join(format!(
-        "looming-engine-{}-{name}-{start_s}-{}",
+        "looming-engine-{}-{name}-{start_s}-{}-{beams}x{columns}",
         std::process::id(),
         config.rotation_compensation
     ));

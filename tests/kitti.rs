@@ -333,9 +333,11 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
     );
     // Points (float bits), rings, per-point times (from the azimuth, equal to
     // the simulator's up to f32 rounding) and motion samples travel
-    // unchanged: the engine gives the same result to float tolerance.
+    // unchanged: the engine gives the same result to float tolerance (with
+    // the range noise estimated per scan, a plane fit may take or leave a
+    // return at its noise gate: 1.8e-4 1/s at most).
     assert!(
-        worst_lidar < 1e-4 && worst_fused < 1e-4,
+        worst_lidar < 5e-4 && worst_fused < 5e-4,
         "largest differences: L_lidar {worst_lidar}, fused {worst_fused} 1/s"
     );
     assert_eq!(

@@ -4,9 +4,8 @@
 //! over unmasked cells, `|D|` p90 on each static class, and moving-cell F1.
 //!
 //! Layouts without a ring or a time field (KITTI-like laser order, driver
-//! clouds in firing order) need the engine's front end to recover rings and
-//! times from the point order; until it does they give no pairs and are
-//! ignored (run them with `cargo test --release --test layouts -- --ignored`).
+//! clouds in firing order) go through the engine's front end
+//! (`engine::layout`), which recovers rings and times from the point order.
 
 mod common;
 
@@ -130,25 +129,21 @@ fn ring_field_line() {
 }
 
 #[test]
-#[ignore = "needs ring recovery: engine front end"]
 fn laser_order() {
     check_layout("laser-order");
 }
 
 #[test]
-#[ignore = "needs ring recovery: engine front end"]
 fn laser_order_kitti() {
     check_layout("laser-order:kitti");
 }
 
 #[test]
-#[ignore = "needs ring recovery: engine front end"]
 fn firing_order() {
     check_layout("firing-order");
 }
 
 #[test]
-#[ignore = "needs ring recovery: engine front end"]
 fn firing_order_sparse() {
     check_layout("firing-order-sparse");
 }

@@ -9,7 +9,9 @@
 //! at `X = R e`, a small extra motion `(w, v)` over `dt` moves the surface by
 //! `-(v + w x X) dt`, so the rendered range changes by
 //!
-//!     dR = -dt ((X x n) . w + n . v) / (n . e)
+//! ```text
+//! dR = -dt ((X x n) . w + n . v) / (n . e)
+//! ```
 //!
 //! Each trusted cell gives one equation `(n . e) (R_now - R_render) =
 //! -dt ((X x n) . w + n . v)`, in metres along the normal; six unknowns,

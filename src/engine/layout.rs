@@ -285,14 +285,27 @@ pub fn complete(scan: &mut Scan, period_s: f64) {
                 };
                 sweep = Some(order.sweep);
             } else if let Some(firing) = firing_order(&scan.points_m, &scan.source_index) {
-                scan.ring = Some(firing.rings);
-                scan.layout.rings = RingSource::FiringOrder {
-                    period: firing.period,
+                // Without its empty returns (the driver removed them) a
+                // cloud loses the period's phase at every dropout: its rings
+                // then come from the elevations, its times still from the
+                // order.
+                let by_elevation = phase_lost(&scan.source_index, firing.period as usize)
+                    .then(|| elevation_rings(&scan.points_m))
+                    .flatten();
+                scan.layout.rings = match by_elevation {
+                    Some(_) => RingSource::Elevation,
+                    None => RingSource::FiringOrder {
+                        period: firing.period,
+                    },
                 };
+                scan.ring = Some(by_elevation.unwrap_or(firing.rings));
                 sweep = Some(firing.sweep);
             } else if let Some(rings) = elevation_rings(&scan.points_m) {
                 scan.ring = Some(rings);
                 scan.layout.rings = RingSource::Elevation;
+                // A driver's cloud with its empty returns removed: no period
+                // in the order, but the order still follows the sweep.
+                sweep = sweep_in_order(&scan.points_m);
             } else {
                 scan.layout.rings = RingSource::None;
             }
@@ -891,6 +904,51 @@ pub fn firing_order(points: &[[f32; 3]], source_index: &[u32]) -> Option<FiringO
         },
     })
 }
+
+/// A firing-order cloud whose empty returns were removed before us: its
+/// points are numbered without gaps, yet do not fill whole firings.
+fn phase_lost(source_index: &[u32], period: usize) -> bool {
+    let contiguous = source_index
+        .last()
+        .is_some_and(|&last| last as usize + 1 == source_index.len());
+    contiguous && period > 0 && !source_index.len().is_multiple_of(period)
+}
+
+/// The sweep of a cloud whose points are in firing order (a driver's cloud,
+/// dense or not): consecutive points a small step apart in azimuth, all one
+/// way, over one turn in all. `None` for any other order.
+pub fn sweep_in_order(points: &[[f32; 3]]) -> Option<Sweep> {
+    let turns: Vec<f64> = points.iter().filter_map(azimuth_turn).collect();
+    if turns.len() < MIN_SWEEP_POINTS {
+        return None;
+    }
+    let mut steps: Vec<f64> = turns.windows(2).map(|w| wrap_turn(w[1] - w[0])).collect();
+    let small = steps.iter().filter(|s| s.abs() < SMALL_STEP_TURN).count();
+    let travelled: f64 = steps.iter().filter(|s| s.abs() < SMALL_STEP_TURN).sum();
+    if (small as f64) < 0.9 * steps.len() as f64 || !(0.8..=1.2).contains(&travelled.abs()) {
+        return None;
+    }
+    let step = median(&mut steps)?;
+    let direction = if travelled > 0.0 && step >= 0.0 {
+        Rotation::CounterClockwise
+    } else if travelled < 0.0 && step <= 0.0 {
+        Rotation::Clockwise
+    } else {
+        return None;
+    };
+    let seam_turn = circular_mean_turn(turns.iter().take(SEAM_POINTS).copied());
+    Some(Sweep {
+        direction,
+        seam_turn: seam_turn.rem_euclid(1.0),
+    })
+}
+
+/// Points a cloud needs before its order is read as a sweep.
+const MIN_SWEEP_POINTS: usize = 1000;
+/// A step between consecutive points of a sweep: under 3.6 degrees.
+const SMALL_STEP_TURN: f64 = 0.01;
+/// Points that place the seam (the first firings).
+const SEAM_POINTS: usize = 64;
 
 /// Returns closer than this are left out of the fits (too much parallax,
 /// often the vehicle itself), metres.

@@ -131,6 +131,28 @@ fn median_f32(values: &mut [f32]) -> f32 {
     *values.select_nth_unstable_by(mid, f32::total_cmp).1
 }
 
+/// Each row's noise, or the sensor's (the median over rows) where the row
+/// is within a third of it: a row's own estimate moves by some 10 % from
+/// scan to scan, and thresholds at 4 sigma then flip cells; a laser really
+/// noisier or quieter than the rest (an HDL-64E's spread 0.007 to 0.05 m)
+/// keeps its own.
+fn shrunk_to_sensor(mut noise: Vec<f32>) -> Vec<f32> {
+    if noise.is_empty() {
+        return noise;
+    }
+    let mut sorted = noise.clone();
+    let sensor = median_f32(&mut sorted);
+    for row in &mut noise {
+        if (*row / sensor - 1.0).abs() < ROW_NOISE_OWN {
+            *row = sensor;
+        }
+    }
+    noise
+}
+
+/// Relative departure from the sensor's noise beyond which a row keeps its own.
+const ROW_NOISE_OWN: f32 = 1.0 / 3.0;
+
 /// Gate of the plane-scatter measurement (a loose noise, metres).
 const LOOSE_NOISE_M: f64 = 0.05;
 /// Every how many columns the plane scatter is measured.
@@ -183,11 +205,11 @@ impl Surfaces {
         geometry: &ImageGeometry,
         params: SurfaceParams,
     ) -> Self {
-        let noise_m_per_row = if params.sparse_rows {
+        let noise_m_per_row = shrunk_to_sensor(if params.sparse_rows {
             row_noise(image, geometry, params.range_noise_m)
         } else {
             noise_per_row(scan, image, geometry, params)
-        };
+        });
         let returns = Returns { scan, image };
         let params = SurfaceParams {
             ground_z_m: if params.sparse_rows {
