@@ -100,6 +100,24 @@ impl Totals {
         self.pairs += 1;
         self.ms += ms;
         self.rows = r.geometry.rows;
+        if std::env::var("AHEAD").is_ok() {
+            // Returns in the lane ahead, above the road: a vehicle's rear face.
+            let mut xs: Vec<f32> = scan
+                .points_m
+                .iter()
+                .filter(|p| {
+                    p[0] > 2.5 && p[0] < 15.0 && p[1].abs() < 1.2 && p[2] > -1.2 && p[2] < 0.5
+                })
+                .map(|p| p[0])
+                .collect();
+            xs.sort_by(f32::total_cmp);
+            let near = xs.get(xs.len() / 10).copied().unwrap_or(f32::NAN);
+            println!(
+                "  ahead: {} returns in the lane 2.5-15 m, near face at {:.2} m",
+                xs.len(),
+                near
+            );
+        }
         let mut trusted = 0;
         for i in 0..scan.points_m.len() {
             if let Some(cell) = r.image.surface_cell(i)

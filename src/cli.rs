@@ -771,9 +771,10 @@ fn summary_text(s: &RunSummary) -> String {
     let a = &s.annotation;
     let _ = writeln!(
         out,
-        "  looming       {} pairs annotated ({} LiDAR-only, {} without a range image); {} points, {} moving, {} at threat; engine {:.1} s",
+        "  looming       {} pairs annotated ({} LiDAR-only, {} with the ego motion estimated from the scans, {} without a range image); {} points, {} moving, {} at threat; engine {:.1} s",
         a.pairs_annotated,
         a.pairs_lidar_only,
+        a.pairs_motion_estimated,
         a.pairs_without_image,
         a.points_written,
         a.disagreement_points_written,

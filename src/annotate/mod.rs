@@ -115,6 +115,9 @@ pub struct AnnotateStats {
     /// Pairs without a velocity source: LiDAR-only looming, no L_ego, D,
     /// moving flags or threat spheres.
     pub pairs_lidar_only: u64,
+    /// Pairs whose velocity or angular rate no source measured, estimated
+    /// from the static world by the engine (`engine::egomotion`).
+    pub pairs_motion_estimated: u64,
     pub points_written: u64,
     pub disagreement_points_written: u64,
     pub threat_points_written: u64,
@@ -184,6 +187,9 @@ impl Annotator {
         self.stats.pairs_annotated += 1;
         if !looming.availability.ego_velocity {
             self.stats.pairs_lidar_only += 1;
+        }
+        if looming.ego_estimate.is_some() {
+            self.stats.pairs_motion_estimated += 1;
         }
         let mut out = Vec::with_capacity(8);
         let ended = self.detector.observe(&PairFrame {

@@ -75,7 +75,7 @@ impl Default for EngineConfig {
             threat_ttc_s: [3.0, 1.5, 1.0],
             moving_sigmas: 4.0,
             moving_min_per_s: 0.15,
-            grazing_cos: 0.05,
+            grazing_cos: 0.15,
             max_closing_speed_mps: 30.0,
             estimate_ego_motion: true,
         }
@@ -670,20 +670,11 @@ fn raw_cell(
     // (road meeting a wall) or an occlusion, where the difference means nothing.
     let current_normal = current.normal[cell];
     let creased = |normal: &[f32; 3]| apart(normal, &current_normal);
-    // Where the ego-moved previous surface meets the current return within
-    // the noise, the two are one static surface whatever their fitted
-    // normals say (on a real sensor a normal from 15 returns can be tens of
-    // degrees off at grazing incidence or where a window holds two lasers'
-    // biases); the rotated render is then checked against the moved one,
-    // two renders of the same previous scan (at a road meeting a wall the
-    // rotated ray may still meet the wall).
-    let coincident = moved.filter(|m| {
-        let predicted = f64::from(m.range_m[cell]);
-        let incidence = f64::from(current.incidence_cos[cell]).max(0.3);
-        (predicted - range_now).abs() * incidence <= 3.0 * current.noise_m(cell)
-    });
-    let creased_here = creased(&rotated.normal[cell])
-        || (coincident.is_none() && moved.is_some_and(|m| creased(&m.normal[cell])));
+    // (Excusing the moved render's crease where it meets the return within
+    // the noise kept 1 % more of a real HDL-64E scan and cost 12 % of the
+    // fused accuracy on the synthetic cut-in at 64 x 2048.)
+    let creased_here =
+        creased(&rotated.normal[cell]) || moved.is_some_and(|m| creased(&m.normal[cell]));
     if creased_here || rotated.edge[cell] || moved.is_some_and(|m| m.edge[cell]) {
         flags |= mask::EDGE;
     }

@@ -334,15 +334,8 @@ fn fit_window(
     let Some(center) = returns.point(cell) else {
         return (EMPTY, None);
     };
-    let range = center.norm();
-    let direction = center / range;
-    let as_f32 = |v: &Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32];
-    let raw = CellSurface {
-        range_m: range as f32,
-        direction: as_f32(&direction),
-        support: 1,
-        ..EMPTY
-    };
+    let raw = raw_surface(&center);
+    let (range, direction) = (center.norm(), center / center.norm());
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
     let Scratch {
         points, on_plane, ..
@@ -392,11 +385,54 @@ fn fit_window(
             None => return (CellSurface { edge, ..raw }, None),
         }
     };
-    let facing = normal.dot(&direction);
-    let normal = if facing > 0.0 { -normal } else { normal };
-    let incidence_cos = facing.abs();
-    // The cell's ray against the plane: the denoised range. Near grazing the
-    // intersection is ill-conditioned, so the raw range stays.
+    let surface = CellSurface {
+        // Signed: positive when the return lies beyond the plane.
+        residual_m: (center - centroid).dot(&(-facing_sensor(normal, &direction))) as f32,
+        support: support.min(255) as u8,
+        edge,
+        ..oriented(&center, &centroid, normal, tolerance)
+    };
+    (surface, Some(spread))
+}
+
+/// A return with no surface fitted: its raw range and direction.
+fn raw_surface(center: &Vector3<f64>) -> CellSurface {
+    let range = center.norm();
+    CellSurface {
+        range_m: range as f32,
+        direction: as_f32(&(center / range)),
+        support: 1,
+        ..EMPTY
+    }
+}
+
+fn as_f32(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+/// `normal` turned to face the sensor along `direction`.
+fn facing_sensor(normal: Vector3<f64>, direction: &Vector3<f64>) -> Vector3<f64> {
+    if normal.dot(direction) > 0.0 {
+        -normal
+    } else {
+        normal
+    }
+}
+
+/// A return on the surface through `centroid` with `normal`: the normal
+/// facing the sensor, the incidence, and the denoised range (the ray
+/// against the surface, where within `tolerance` of the raw range; near
+/// grazing the intersection is ill-conditioned, so the raw range stays).
+fn oriented(
+    center: &Vector3<f64>,
+    centroid: &Vector3<f64>,
+    normal: Vector3<f64>,
+    tolerance: f64,
+) -> CellSurface {
+    let range = center.norm();
+    let direction = center / range;
+    let normal = facing_sensor(normal, &direction);
+    let incidence_cos = normal.dot(&direction).abs();
     let denoised = if incidence_cos >= 0.1 {
         centroid.dot(&normal) / direction.dot(&normal)
     } else {
@@ -407,17 +443,13 @@ fn fit_window(
     } else {
         range
     };
-    let surface = CellSurface {
-        // Signed: positive when the return lies beyond the plane.
-        residual_m: (center - centroid).dot(&(-normal)) as f32,
+    CellSurface {
         range_m: range_m as f32,
         direction: as_f32(&direction),
         normal: as_f32(&normal),
         incidence_cos: incidence_cos as f32,
-        support: support.min(255) as u8,
-        edge,
-    };
-    (surface, Some(spread))
+        ..raw_surface(center)
+    }
 }
 
 /// The ground's height below a sparse sensor: the median height of the
@@ -457,15 +489,8 @@ fn fit_ring_cell(
     let Some(center) = returns.point(cell) else {
         return EMPTY;
     };
-    let range = center.norm();
-    let direction = center / range;
-    let as_f32 = |v: &Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32];
-    let raw = CellSurface {
-        range_m: range as f32,
-        direction: as_f32(&direction),
-        support: 1,
-        ..EMPTY
-    };
+    let raw = raw_surface(&center);
+    let (range, direction) = (center.norm(), center / center.norm());
     let Scratch {
         points, immediate, ..
     } = scratch;
@@ -519,28 +544,12 @@ fn fit_ring_cell(
             Vector3::new(direction.x, direction.y, 0.0).normalize()
         }
     };
-    let facing = normal.dot(&direction);
-    let normal = if facing > 0.0 { -normal } else { normal };
-    let incidence_cos = facing.abs();
-    let denoised = if incidence_cos >= 0.1 {
-        centroid.dot(&normal) / direction.dot(&normal)
-    } else {
-        range
-    };
-    let range_m = if (denoised - range).abs() <= tolerance && denoised > 0.0 {
-        denoised
-    } else {
-        range
-    };
     let d = center - centroid;
     CellSurface {
         residual_m: (d - tangent * d.dot(&tangent)).norm() as f32,
-        range_m: range_m as f32,
-        direction: as_f32(&direction),
-        normal: as_f32(&normal),
-        incidence_cos: incidence_cos as f32,
         support: support.min(255) as u8,
         edge,
+        ..oriented(&center, &centroid, normal, tolerance)
     }
 }
 

@@ -133,9 +133,34 @@ pub fn hot_clusters(
         .filter(|cluster| {
             cluster.looming_per_s >= threshold_per_s
                 && cluster.lateral_offset_m <= config.corridor_half_width_m
+                && plausible_if_static(cluster, looming.velocity_mps, config.facing_cos)
         })
         .collect()
 }
+
+/// A static surface facing the sensor within `acos(facing_cos)` looms at
+/// most `|t| / (facing_cos R)` along any ray (`(n . t) / ((n . e) R)`), `t` the
+/// ego velocity: a cluster with no moving cell that reads far more is an
+/// artefact (on a real HDL-64E log, cells at 2.4 m reading 13 1/s at 7 m/s,
+/// where at most 6 is possible). A fifth more is allowed for the
+/// velocity's own error. Unknown velocity: no check.
+fn plausible_if_static(cluster: &Cluster, velocity_mps: Option<[f64; 3]>, facing_cos: f64) -> bool {
+    let Some(v) = velocity_mps else {
+        return true;
+    };
+    if cluster.moving_cells > 0 {
+        return true;
+    }
+    let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let bound = STATIC_BOUND_MARGIN * speed / (facing_cos.max(0.1) * cluster.near_range_m.max(0.5))
+        + STATIC_BOUND_SLACK_PER_S;
+    cluster.looming_per_s <= bound
+}
+
+/// Margin on the static bound for an estimated or noisy velocity.
+const STATIC_BOUND_MARGIN: f64 = 1.2;
+/// Looming noise allowed on top of the static bound, 1/s.
+const STATIC_BOUND_SLACK_PER_S: f64 = 0.3;
 
 /// Trusted cells a cluster needs for its value to come from them alone.
 const MIN_TRUSTED_CELLS: usize = 3;

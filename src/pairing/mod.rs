@@ -640,7 +640,7 @@ impl ScanPairer {
             } else {
                 "no velocity source"
             };
-            self.warn_once(reason, format!("{reason}: pairs carry no ego velocity (ego-motion looming unavailable for them)"), events);
+            self.warn_once(reason, format!("{reason}: the engine estimates the ego motion from the static world where the scans allow it (`looming` summary line); other pairs carry no ego velocity"), events);
         }
         if gyro_input.is_none() {
             let reason = if self.cfg.has_imu_source {
