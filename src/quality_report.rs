@@ -65,6 +65,11 @@ fn layout_text(layout: Option<&serde_json::Value>) -> String {
     match layout {
         None | Some(serde_json::Value::Null) => "unknown".into(),
         Some(serde_json::Value::String(s)) => s.clone(),
+        // The record's own words, as the run summary printed them.
+        Some(serde_json::Value::Object(fields)) => match fields.get("description") {
+            Some(serde_json::Value::String(s)) => s.clone(),
+            _ => serde_json::Value::Object(fields.clone()).to_string(),
+        },
         Some(other) => other.to_string(),
     }
 }
@@ -866,5 +871,11 @@ mod tests {
             r#"{"rings":"field","times":"field"}"#
         );
         assert!(record.quality.is_none());
+        let described =
+            serde_json::json!({"rings": "field", "description": "ring field `ring` (32 rings)"});
+        assert_eq!(
+            layout_text(Some(&described)),
+            "ring field `ring` (32 rings)"
+        );
     }
 }
