@@ -558,18 +558,23 @@ const RING_HALF_WINDOW: usize = 3;
 /// A ring's line is level when its direction rises less than this (sine).
 const LEVEL_TANGENT_Z: f64 = 0.3;
 
+/// Centroid and scatter matrix (sum of outer products about it) of points.
+fn scatter(points: &[Vector3<f64>]) -> (Vector3<f64>, Matrix3<f64>) {
+    let centroid = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    let covariance = points.iter().fold(Matrix3::zeros(), |acc, p| {
+        let d = p - centroid;
+        acc + d * d.transpose()
+    });
+    (centroid, covariance)
+}
+
 /// Least-squares line: unit direction and centroid; None for fewer than 3
 /// points or no spread.
 fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
     if points.len() < 3 {
         return None;
     }
-    let centroid = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-    let mut covariance = Matrix3::zeros();
-    for p in points {
-        let d = p - centroid;
-        covariance += d * d.transpose();
-    }
+    let (centroid, covariance) = scatter(points);
     let (_, _, largest) = symmetric_eigenvalues(&covariance)?;
     if !(largest.is_finite() && largest > 0.0) {
         return None;
@@ -591,12 +596,7 @@ fn fit_plane_spread(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f6
     if points.len() < 4 {
         return None;
     }
-    let centroid = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-    let mut covariance = Matrix3::zeros();
-    for p in points {
-        let d = p - centroid;
-        covariance += d * d.transpose();
-    }
+    let (centroid, covariance) = scatter(points);
     let (smallest, middle, largest) = symmetric_eigenvalues(&covariance)?;
     // Collinear points (one row only) do not define a plane.
     if largest.is_nan() || largest <= 0.0 || middle < 1e-3 * largest || !smallest.is_finite() {
