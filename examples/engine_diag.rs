@@ -2,8 +2,6 @@
 //! points, mask bits, the ground's looming. A development tool:
 //! `cargo run --release --example engine_diag -- LOG.mcap [PAIRS]`.
 
-use std::sync::Arc;
-
 use looming::engine::{self, EngineCache, EngineConfig, mask};
 use looming::messages::Scan;
 
@@ -15,23 +13,15 @@ fn main() {
         .map_or(usize::MAX, |a| a.parse().expect("a count"));
     let config = EngineConfig::default();
     let mut cache = EngineCache::default();
-    let mut last: Option<Arc<Scan>> = None;
     let mut totals = Totals::default();
     let mut done = 0;
-    looming::replay::replay(std::path::Path::new(path), &mut |_| {}, &mut |mut pair| {
+    // Rings and times the clouds lack come from the engine's front end
+    // (`engine::layout`), which runs in the pairer as in `process`.
+    looming::replay::replay(std::path::Path::new(path), &mut |_| {}, &mut |pair| {
         if done >= max_pairs {
             return;
         }
         done += 1;
-        if let Some(previous) = &last
-            && previous.stamp_ns == pair.previous.stamp_ns
-        {
-            pair.previous = previous.clone();
-        } else {
-            pair.previous = Arc::new(prepared(&pair.previous));
-        }
-        pair.current = Arc::new(prepared(&pair.current));
-        last = Some(pair.current.clone());
         let started = std::time::Instant::now();
         let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
             println!("pair {}: no image", pair.index);
@@ -42,40 +32,6 @@ fn main() {
     })
     .expect("a readable log");
     totals.print();
-}
-
-/// Today's stand-in for the engine's front end: laser-order rings and
-/// azimuth times where the cloud has none (KITTI).
-fn prepared(scan: &Scan) -> Scan {
-    let mut scan = scan.clone();
-    if std::env::var("NOTIME").is_ok() {
-        scan.time_offset_s = None;
-    }
-    if scan.ring.is_none() {
-        let points: Vec<[f32; 4]> = scan
-            .points_m
-            .iter()
-            .map(|p| [p[0], p[1], p[2], 0.0])
-            .collect();
-        scan.ring = looming::kitti::velodyne::derive_rings(&points);
-        if scan.time_offset_s.is_none() && scan.ring.is_some() {
-            scan.time_offset_s = Some(
-                scan.points_m
-                    .iter()
-                    .map(|p| {
-                        let f = looming::kitti::velodyne::sweep_fraction(p[0], p[1]);
-                        let f = if std::env::var("CW").is_ok() {
-                            1.0 - f
-                        } else {
-                            f
-                        };
-                        (f * 0.1) as f32
-                    })
-                    .collect(),
-            );
-        }
-    }
-    scan
 }
 
 #[derive(Default)]

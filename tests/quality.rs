@@ -7,7 +7,7 @@ mod common;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
-use common::{looming, looming_process, read_all, scratch, stderr};
+use common::{looming, looming_process, looming_quality, read_all, scratch, stderr};
 use serde_json::Value;
 
 fn sample(name: &str) -> PathBuf {
@@ -24,17 +24,8 @@ fn process_and_quality(input: &Path, dir: &Path, name: &str, extra: &[&str]) -> 
     args.extend_from_slice(extra);
     let run = looming_process(input, &output, &args);
     assert!(run.status.success(), "process {name}: {}", stderr(&run));
-    let json = dir.join(format!("{name}.quality.json"));
-    let run = looming(&[
-        "quality",
-        output.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert!(run.status.success(), "quality {name}: {}", stderr(&run));
-    let text = String::from_utf8(run.stdout).unwrap();
+    let (report, text) = looming_quality(&output, &dir.join(format!("{name}.quality.json")));
     println!("== {name}\n{text}");
-    let report: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let schema: Value =
         serde_json::from_str(include_str!("../schemas/looming.QualityReport.schema.json")).unwrap();
     let validator = jsonschema::validator_for(&schema).unwrap();

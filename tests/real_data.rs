@@ -15,7 +15,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{looming, looming_process, scratch, stderr};
+use common::{looming_process, looming_quality, scratch, stderr};
 use serde_json::Value;
 
 const MIN_TRUSTED_FRACTION: f64 = 0.60;
@@ -53,16 +53,8 @@ fn measure(log: &Path, dir: &Path) -> (String, Value) {
     let output = dir.join(format!("{name}.looming.mcap"));
     let run = looming_process(log, &output, &["--fields", "full", "--force"]);
     assert!(run.status.success(), "process {name}: {}", stderr(&run));
-    let json = dir.join(format!("{name}.quality.json"));
-    let run = looming(&[
-        "quality",
-        output.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    assert!(run.status.success(), "quality {name}: {}", stderr(&run));
-    println!("==== {name}\n{}", String::from_utf8_lossy(&run.stdout));
-    let report = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let (report, text) = looming_quality(&output, &dir.join(format!("{name}.quality.json")));
+    println!("==== {name}\n{text}");
     let _ = std::fs::remove_file(&output);
     (name, report)
 }

@@ -47,16 +47,28 @@ struct Equation {
     misfit_m: f64,
 }
 
-/// The correction `(w, v)` to add to the motion the render was made with,
-/// and the robust misfit scale; `None` without enough static surface to
-/// pin the motion down.
+/// What one alignment of a render gives.
+#[derive(Debug, Clone, Copy)]
+pub struct Correction {
+    /// To add to the angular velocity the render was made with, rad/s.
+    pub angular_radps: Vector3<f64>,
+    /// To add to the velocity the render was made with, m/s.
+    pub velocity_mps: Vector3<f64>,
+    /// Cells whose equation took part (weight above one half).
+    pub inlier_cells: usize,
+    /// Robust scale of the misfit along the normals, metres.
+    pub residual_m: f64,
+}
+
+/// The correction to the motion the render was made with; `None` without
+/// enough static surface to pin the motion down.
 pub fn correction(
     current: &Surfaces,
     current_time_ns: &[StampNs],
     rendered: &Rendered,
     range_noise_m: f64,
     prior: &Prior,
-) -> Option<(Vector3<f64>, Vector3<f64>, usize, f64)> {
+) -> Option<Correction> {
     let equations = equations(current, current_time_ns, rendered);
     if equations.len() < MIN_EQUATIONS {
         return None;
@@ -95,12 +107,12 @@ pub fn correction(
     if !solution.iter().all(|x| x.is_finite()) {
         return None;
     }
-    Some((
-        Vector3::new(solution[0], solution[1], solution[2]),
-        Vector3::new(solution[3], solution[4], solution[5]),
-        inliers,
-        scale,
-    ))
+    Some(Correction {
+        angular_radps: Vector3::new(solution[0], solution[1], solution[2]),
+        velocity_mps: Vector3::new(solution[3], solution[4], solution[5]),
+        inlier_cells: inliers,
+        residual_m: scale,
+    })
 }
 
 /// Which parts of the motion a source measured: those stay as measured.

@@ -401,7 +401,7 @@ fn estimate_motion(
         let trial = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
         let trajectory = Trajectory::integrate(&trial, MotionModel::Full, true, start_ns, end_ns)?;
         let rendered = warp::render(source, target, geometry, &trajectory, offset_ns);
-        let Some((d_angular, d_velocity, inliers, scale)) = egomotion::correction(
+        let Some(step) = egomotion::correction(
             current,
             current_time,
             &rendered,
@@ -410,16 +410,21 @@ fn estimate_motion(
         ) else {
             break;
         };
-        angular += d_angular;
-        velocity += d_velocity;
-        fit = Some((inliers, scale));
-        // Converged: the update moves the surface by less than a millimetre.
+        angular += step.angular_radps;
+        velocity += step.velocity_mps;
+        fit = Some(step);
+        // Converged: the update moves a surface 10 m away by less than a
+        // millimetre.
         let dt_s = offset_ns as f64 * 1e-9;
-        if (d_velocity.norm() + d_angular.norm() * 10.0) * dt_s < 1e-3 {
+        if (step.velocity_mps.norm() + step.angular_radps.norm() * 10.0) * dt_s < 1e-3 {
             break;
         }
     }
-    let (inlier_cells, residual_m) = fit?;
+    let egomotion::Correction {
+        inlier_cells,
+        residual_m,
+        ..
+    } = fit?;
     let motion = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
     Some((
         motion,

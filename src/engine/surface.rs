@@ -27,13 +27,14 @@ pub struct Surfaces {
     /// Range noise of each row's laser (1 sigma), metres, estimated from the
     /// scan itself (`row_noise`).
     pub noise_m_per_row: Vec<f32>,
+    /// Columns of the image (cells per row).
+    pub cols: usize,
 }
 
 impl Surfaces {
     /// Range noise (1 sigma) of a cell's laser, metres.
     pub fn noise_m(&self, cell: usize) -> f64 {
-        let cols = self.range_m.len() / self.noise_m_per_row.len().max(1);
-        f64::from(self.noise_m_per_row[cell / cols.max(1)])
+        f64::from(self.noise_m_per_row[cell / self.cols])
     }
 }
 
@@ -238,6 +239,7 @@ impl Surfaces {
             support: fitted.iter().map(|c| c.support).collect(),
             edge: fitted.iter().map(|c| c.edge).collect(),
             noise_m_per_row,
+            cols: geometry.cols,
         }
     }
 }

@@ -230,3 +230,23 @@ pub fn assert_all_input_messages_copied(input: &FileContents, output: &FileConte
         );
     }
 }
+
+/// `looming quality OUTPUT --json JSON` through the binary: the JSON report
+/// and the text printed (the run must succeed).
+pub fn looming_quality(output: &Path, json: &Path) -> (serde_json::Value, String) {
+    let run = looming(&[
+        "quality",
+        output.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "quality {}: {}",
+        output.display(),
+        stderr(&run)
+    );
+    let text = String::from_utf8_lossy(&run.stdout).into_owned();
+    let report = serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap();
+    (report, text)
+}
