@@ -1,6 +1,15 @@
 //! Where the engine's trust goes on a log, pair by pair: trusted share of
 //! points, mask bits, the ground's looming. A development tool:
 //! `cargo run --release --example engine_diag -- LOG.mcap [PAIRS]`.
+//!
+//! More, by environment variable: `DIAG_ROWS` (masks per row), `DIAG_PNG=F`
+//! (the second pair's mask, and its `L_lidar`, `L_ray_ego` and fused
+//! looming as `F_lidar.png` ...), `DIAG_NORMALS` (ground normal tilt),
+//! `DIAG_GROUND_ROWS`, `AHEAD` (returns in the lane ahead), `DIAG_FIT` (the
+//! trusted ground's looming fitted to a rotation-rate and vertical-velocity
+//! error, whole scan and per azimuth sector, and what is left by range),
+//! `DIAG_BIAS` (each ring's range residual on the ground ahead and the
+//! per-laser offsets the engine took out).
 
 use looming::engine::{self, EngineCache, EngineConfig, mask};
 use looming::messages::Scan;
@@ -159,6 +168,12 @@ impl Totals {
                 self.static_d.push(d.abs());
             }
         }
+        if std::env::var("DIAG_BIAS").is_ok() {
+            ring_bias(scan, r);
+        }
+        if std::env::var("DIAG_FIT").is_ok() {
+            ground_fit(scan, r, ground_z);
+        }
         {
             let cols = r.geometry.cols;
             let (mut n_pairs, mut bad, mut bad_vert) = (0, 0, 0);
@@ -189,6 +204,9 @@ impl Totals {
             && self.pairs == 2
         {
             mask_png(r, &png);
+            value_png(&r.l_lidar, r, &png.replace(".png", "_lidar.png"));
+            value_png(&r.l_ray_ego, r, &png.replace(".png", "_rayego.png"));
+            value_png(&r.fused, r, &png.replace(".png", "_fused.png"));
         }
         if std::env::var("DIAG_ROWS").is_ok() {
             let cols = r.geometry.cols;
@@ -326,34 +344,215 @@ fn median(values: &mut Vec<f32>) -> f32 {
 /// The mask as a picture, 3 pixels per row: trusted green, edge red,
 /// no previous blue, grazing yellow, no ego magenta, occlusion cyan.
 fn mask_png(r: &engine::PairLooming, path: &str) {
+    cell_png(r, path, |cell| {
+        let m = r.mask[cell];
+        if m & mask::EMPTY != 0 {
+            [0, 0, 0]
+        } else if m == 0 {
+            [40, 160, 40]
+        } else if m & mask::EDGE != 0 {
+            [220, 40, 40]
+        } else if m & mask::NO_PREVIOUS != 0 {
+            [40, 40, 220]
+        } else if m & mask::GRAZING != 0 {
+            [220, 220, 40]
+        } else if m & mask::NO_EGO != 0 {
+            [200, 40, 200]
+        } else {
+            [40, 200, 200]
+        }
+    });
+}
+
+/// The range image as a picture, 3 pixels per row (highest beam on top),
+/// each cell coloured by `colour_of(cell)`.
+fn cell_png(r: &engine::PairLooming, path: &str, colour_of: impl Fn(usize) -> [u8; 3]) {
     let (rows, cols) = (r.geometry.rows, r.geometry.cols);
     let mut img = image::RgbImage::new(cols as u32, (rows * 3) as u32);
     for row in 0..rows {
         for col in 0..cols {
-            let m = r.mask[row * cols + col];
-            let colour = if m & mask::EMPTY != 0 {
-                [0, 0, 0]
-            } else if m == 0 {
-                [40, 160, 40]
-            } else if m & mask::EDGE != 0 {
-                [220, 40, 40]
-            } else if m & mask::NO_PREVIOUS != 0 {
-                [40, 40, 220]
-            } else if m & mask::GRAZING != 0 {
-                [220, 220, 40]
-            } else if m & mask::NO_EGO != 0 {
-                [200, 40, 200]
-            } else {
-                [40, 200, 200]
-            };
+            let colour = image::Rgb(colour_of(row * cols + col));
             for k in 0..3 {
-                img.put_pixel(
-                    col as u32,
-                    ((rows - 1 - row) * 3 + k) as u32,
-                    image::Rgb(colour),
-                );
+                img.put_pixel(col as u32, ((rows - 1 - row) * 3 + k) as u32, colour);
             }
         }
     }
     img.save(path).expect("png");
+}
+
+/// Fits the trusted static ground's looming to what a rotation-rate error
+/// (about x and y) and a vertical-velocity error would read:
+/// `L = a + b e_y / s + c e_x / s`, s = -e_z; prints the spread before and after.
+fn ground_fit(scan: &Scan, r: &engine::PairLooming, ground_z: f32) {
+    for (name, values) in [
+        ("l_lidar", &r.l_lidar),
+        ("l_ray_ego", &r.l_ray_ego),
+        ("fused", &r.fused),
+    ] {
+        let mut rows = Vec::new();
+        let mut ranges: Vec<f32> = Vec::new();
+        let mut azimuths: Vec<f32> = Vec::new();
+        for (cell, &value) in values.iter().enumerate() {
+            if r.mask[cell] != 0 || r.moving[cell] || !value.is_finite() {
+                continue;
+            }
+            let p = scan.points_m[r.image.point[cell] as usize];
+            let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let flat = (p[0] * p[0] + p[1] * p[1]).sqrt();
+            if r.normal[cell][2] > 0.96 && (p[2] - ground_z).abs() < 0.2 + 0.01 * flat {
+                let s = -p[2] / range;
+                ranges.push(range);
+                azimuths.push(p[1].atan2(p[0]));
+                rows.push((
+                    [
+                        1.0f64,
+                        f64::from(p[1] / range / s),
+                        f64::from(p[0] / range / s),
+                    ],
+                    f64::from(value),
+                ));
+            }
+        }
+        if rows.len() < 50 {
+            continue;
+        }
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atb = nalgebra::Vector3::<f64>::zeros();
+        for (x, y) in &rows {
+            let v = nalgebra::Vector3::from(*x);
+            ata += v * v.transpose();
+            atb += v * *y;
+        }
+        let Some(k) = ata.try_inverse().map(|i| i * atb) else {
+            continue;
+        };
+        let mut before: Vec<f32> = rows.iter().map(|(_, y)| y.abs() as f32).collect();
+        let mut after: Vec<f32> = rows
+            .iter()
+            .map(|(x, y)| (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32)
+            .collect();
+        // Per azimuth sector (time within the sweep): a motion error that
+        // changes within the scan.
+        let sectors = 8usize;
+        let mut sec: Vec<(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>)> =
+            vec![(nalgebra::Matrix3::zeros(), nalgebra::Vector3::zeros()); sectors];
+        for ((x, y), az) in rows.iter().zip(&azimuths) {
+            let v = nalgebra::Vector3::from(*x);
+            let k = sector_of(*az, sectors);
+            sec[k].0 += v * v.transpose();
+            sec[k].1 += v * *y;
+        }
+        let sol: Vec<Option<nalgebra::Vector3<f64>>> = sec
+            .iter()
+            .map(|(m, b)| m.try_inverse().map(|i| i * b))
+            .collect();
+        let mut after_sector: Vec<f32> = rows
+            .iter()
+            .zip(&azimuths)
+            .map(|((x, y), az)| match sol[sector_of(*az, sectors)] {
+                Some(k) => (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32,
+                None => y.abs() as f32,
+            })
+            .collect();
+        println!(
+            "      per-sector fit: median |L| -> {:.4}",
+            median(&mut after_sector)
+        );
+        println!(
+            "  fit {name:9} n {:6} a {:+.4} b {:+.4} c {:+.4}: median |L| {:.4} -> {:.4}",
+            rows.len(),
+            k[0],
+            k[1],
+            k[2],
+            median(&mut before),
+            median(&mut after)
+        );
+        let mut bins: Vec<Vec<f32>> = vec![Vec::new(); 12];
+        for ((x, y), range) in rows.iter().zip(&ranges) {
+            let res = (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32;
+            let b = ((*range / 2.0) as usize).min(11);
+            bins[b].push(res * 0.1 * *range);
+        }
+        let text: Vec<String> = bins
+            .iter_mut()
+            .enumerate()
+            .filter(|(_, v)| v.len() > 30)
+            .map(|(i, v)| format!("{}m:{:.3}", 2 * i, median(v)))
+            .collect();
+        println!("      |dr| by range: {}", text.join(" "));
+    }
+}
+
+/// Per row: median range residual of the ground ahead (and behind) about one
+/// plane fitted to it, metres: a per-laser range bias shows as a staircase.
+fn ring_bias(scan: &Scan, r: &engine::PairLooming) {
+    let pick = |cell: usize| {
+        if r.mask[cell] & mask::EMPTY != 0 {
+            return None;
+        }
+        let p = scan.points_m[r.image.point[cell] as usize];
+        let ok =
+            p[0].abs() > 4.0 && p[0].abs() < 16.0 && p[1].abs() < 3.0 && p[2] < -1.4 && p[2] > -2.1;
+        ok.then_some(p)
+    };
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atb = nalgebra::Vector3::<f64>::zeros();
+    for cell in 0..r.geometry.cells() {
+        if let Some(p) = pick(cell) {
+            let v = nalgebra::Vector3::new(1.0, f64::from(p[0]), f64::from(p[1]));
+            ata += v * v.transpose();
+            atb += v * f64::from(p[2]);
+        }
+    }
+    let Some(k) = ata.try_inverse().map(|i| i * atb) else {
+        return;
+    };
+    let mut per_row: Vec<Vec<f32>> = vec![Vec::new(); r.geometry.rows];
+    for cell in 0..r.geometry.cells() {
+        if let Some(p) = pick(cell) {
+            let dz = f64::from(p[2]) - (k[0] + k[1] * f64::from(p[0]) + k[2] * f64::from(p[1]));
+            let range = f64::from(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let sin = -f64::from(p[2]) / range;
+            if dz.abs() < 0.15 {
+                per_row[cell / r.geometry.cols].push((-dz / sin) as f32);
+            }
+        }
+    }
+    let text: Vec<String> = per_row
+        .iter_mut()
+        .enumerate()
+        .filter(|(_, v)| v.len() > 20)
+        .map(|(row, v)| format!("{row}:{:+.3}", median(v)))
+        .collect();
+    println!("  ring range residual: {}", text.join(" "));
+    let bias: Vec<String> = r
+        .range_bias_m_per_row
+        .iter()
+        .enumerate()
+        .map(|(row, b)| format!("{row}:{b:+.3}"))
+        .collect();
+    println!("  estimated bias: {}", bias.join(" "));
+}
+
+/// Looming of trusted cells as a picture, 3 pixels per row: red approaching,
+/// blue receding, saturated at 0.1 1/s; masked cells dark grey.
+fn value_png(values: &[f32], r: &engine::PairLooming, path: &str) {
+    cell_png(r, path, |cell| {
+        let v = values[cell];
+        if r.mask[cell] != 0 || !v.is_finite() {
+            return [30, 30, 30];
+        }
+        let t = (v / 0.1).clamp(-1.0, 1.0);
+        let k = (255.0 * t.abs()) as u8;
+        if t > 0.0 {
+            [255, 255 - k, 255 - k]
+        } else {
+            [255 - k, 255 - k, 255]
+        }
+    });
+}
+
+fn sector_of(azimuth: f32, sectors: usize) -> usize {
+    let t = (azimuth + std::f32::consts::PI) / std::f32::consts::TAU;
+    ((t * sectors as f32) as usize).min(sectors - 1)
 }

@@ -244,6 +244,10 @@ pub struct PairQuality {
     pub ego_velocity: bool,
     /// Range noise (1 sigma) the engine used per ring (beam, lowest first), m.
     pub range_noise_m_per_ring: Vec<f32>,
+    /// Range offset of each ring's laser the engine estimated and took out,
+    /// m (all zero when it found none; empty in logs written before it).
+    #[serde(default)]
+    pub range_offset_m_per_ring: Vec<f32>,
 }
 
 fn ratio(part: u64, whole: u64) -> Option<f64> {
@@ -336,6 +340,7 @@ impl PairQuality {
             threat_cells: threat,
             ego_velocity: ego,
             range_noise_m_per_ring: looming.range_noise_m_per_row.clone(),
+            range_offset_m_per_ring: looming.range_bias_m_per_row.clone(),
         }
     }
 }
@@ -563,6 +568,7 @@ mod tests {
                 incidence_cos: vec![1.0; cells],
                 normal: self.normals,
                 range_noise_m_per_row: vec![0.02, 0.03],
+                range_bias_m_per_row: vec![0.0, 0.0],
                 dt_s: vec![0.1; cells],
                 l_ego: vec![f32::NAN; n_points],
                 point_threat: vec![ThreatLevel::None; n_points],

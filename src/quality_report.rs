@@ -107,6 +107,19 @@ pub struct RangeNoise {
     pub per_ring_m: Vec<f64>,
 }
 
+/// The per-laser range offsets the engine took out (`engine::bias`).
+#[derive(Debug, Clone, Serialize)]
+pub struct RangeOffsets {
+    /// Rings with an offset reported.
+    pub rings: usize,
+    /// Root mean square over rings, metres; 0 when none was found.
+    pub rms_m: Option<f64>,
+    /// Largest |offset|, metres.
+    pub max_abs_m: Option<f64>,
+    /// Per ring, the median over pairs, metres.
+    pub per_ring_m: Vec<f64>,
+}
+
 /// How one ground quantity (fused or D) reads on the two halves over the log.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct GroundSides {
@@ -144,6 +157,7 @@ pub struct QualityTotals {
     /// Pairs per layout.
     pub layouts: BTreeMap<String, u64>,
     pub range_noise: RangeNoise,
+    pub range_offsets: RangeOffsets,
     pub ground_cells: u64,
     pub ground_trusted_static_cells: u64,
     /// Trusted ground cells flagged moving, and their share of the trusted
@@ -282,6 +296,7 @@ struct Builder {
     masked: MaskCounts,
     layouts: BTreeMap<String, u64>,
     noise_per_ring: Vec<Vec<f64>>,
+    offset_per_ring: Vec<Vec<f64>>,
     ground_cells: u64,
     ground_trusted_static: u64,
     ground_moving: u64,
@@ -340,6 +355,15 @@ impl Builder {
                 self.noise_per_ring[ring].push(f64::from(*noise));
             }
         }
+        if self.offset_per_ring.len() < q.range_offset_m_per_ring.len() {
+            self.offset_per_ring
+                .resize(q.range_offset_m_per_ring.len(), Vec::new());
+        }
+        for (ring, offset) in q.range_offset_m_per_ring.iter().enumerate() {
+            if offset.is_finite() {
+                self.offset_per_ring[ring].push(f64::from(*offset));
+            }
+        }
         let g = &q.ground;
         self.ground_cells += g.cells;
         self.ground_trusted_static += g.trusted_static_cells;
@@ -387,6 +411,19 @@ impl Builder {
             max_m: finite.iter().copied().max_by(f64::total_cmp),
             per_ring_m: per_ring_m.into_iter().filter(|v| v.is_finite()).collect(),
         };
+        let offsets_m: Vec<f64> = self
+            .offset_per_ring
+            .iter_mut()
+            .filter_map(|v| median(v))
+            .collect();
+        let range_offsets = RangeOffsets {
+            rings: offsets_m.len(),
+            rms_m: (!offsets_m.is_empty()).then(|| {
+                (offsets_m.iter().map(|b| b * b).sum::<f64>() / offsets_m.len() as f64).sqrt()
+            }),
+            max_abs_m: offsets_m.iter().map(|b| b.abs()).max_by(f64::total_cmp),
+            per_ring_m: offsets_m,
+        };
         let masked_cell_fractions = self
             .masked
             .named()
@@ -407,6 +444,7 @@ impl Builder {
             dominant_mask: self.masked.dominant().map(|(n, _)| n.to_string()),
             layouts: self.layouts,
             range_noise,
+            range_offsets,
             ground_cells: self.ground_cells,
             ground_trusted_static_cells: self.ground_trusted_static,
             ground_moving_cells: self.ground_moving,
@@ -676,6 +714,16 @@ impl QualityReport {
             m(noise.max_m),
             noise.rings
         );
+        let offsets = &t.range_offsets;
+        let offsets_text = match (offsets.rms_m, offsets.max_abs_m) {
+            (Some(rms), Some(max)) if max > 0.0 => format!(
+                "rms {rms:.3} / max {max:.3} m, taken out ({} rings)",
+                offsets.rings
+            ),
+            (Some(_), _) => format!("none found ({} rings)", offsets.rings),
+            _ => "-".into(),
+        };
+        let _ = writeln!(out, "  range offset per ring  {offsets_text}");
         let _ = writeln!(
             out,
             "  ground                 {} cells, {} trusted static; sensor {} m above it, \

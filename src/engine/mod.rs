@@ -18,6 +18,7 @@
 //! lights up the static world.
 
 pub mod beams;
+mod bias;
 pub mod egomotion;
 pub mod grid;
 pub mod layout;
@@ -63,6 +64,9 @@ pub struct EngineConfig {
     /// Where no source measured the velocity or the angular rate over a
     /// pair, estimate them from the static world (`engine::egomotion`).
     pub estimate_ego_motion: bool,
+    /// Estimate each laser's range offset from the scans and take it out
+    /// (`engine::bias`).
+    pub correct_range_bias: bool,
 }
 
 impl Default for EngineConfig {
@@ -78,6 +82,7 @@ impl Default for EngineConfig {
             grazing_cos: 0.15,
             max_closing_speed_mps: 30.0,
             estimate_ego_motion: true,
+            correct_range_bias: true,
         }
     }
 }
@@ -141,6 +146,9 @@ pub struct PairLooming {
     /// Per row (beam, lowest first): the range noise (1 sigma, metres) used
     /// for that beam's cells.
     pub range_noise_m_per_row: Vec<f32>,
+    /// Per row: the laser's range offset estimated from the scan and taken
+    /// out of its returns, metres (all zero where the scan shows none).
+    pub range_bias_m_per_row: Vec<f32>,
     /// Time between the compared returns, s.
     pub dt_s: Vec<f32>,
     /// Per point: `L_ego`, 1/s (NaN without velocity).
@@ -163,6 +171,8 @@ pub struct PairLooming {
 #[derive(Default)]
 pub struct EngineCache {
     last: Option<CachedScan>,
+    /// The sensor's per-laser range offsets, averaged over the log's scans.
+    range_bias: bias::RangeBias,
 }
 
 struct CachedScan {
@@ -212,20 +222,44 @@ pub fn compute_with_cache(
         .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
         .and_then(|c| c.estimate);
     let cached = last.filter(|c| c.matches(&pair.previous, &geometry));
-    let ((prev_image, prev_surfaces), (cur_image, cur_surfaces)) = rayon::join(
+    // Each scan's offsets join the sensor's running estimate in time order
+    // (the previous scan first, when it was not cached).
+    let correct = config.correct_range_bias;
+    let scan_bias = |scan: &Scan, image: &RangeImage| {
+        correct
+            .then(|| bias::estimate(scan, image, &geometry))
+            .flatten()
+    };
+    let (previous_gridded, (cur_image, cur_bias)) = rayon::join(
         || match cached {
-            Some(c) => (c.image, c.surfaces),
+            Some(c) => Ok((c.image, c.surfaces)),
             None => {
                 let image = RangeImage::build(previous, &geometry);
-                let surfaces = Surfaces::estimate(previous, &image, &geometry, params);
-                (image, surfaces)
+                let bias = scan_bias(previous, &image);
+                Err((image, bias))
             }
         },
         || {
             let image = RangeImage::build(current, &geometry);
-            let surfaces = Surfaces::estimate(current, &image, &geometry, params);
-            (image, surfaces)
+            let bias = scan_bias(current, &image);
+            (image, bias)
         },
+    );
+    let rows = geometry.rows;
+    let previous_to_fit = previous_gridded.map_err(|(image, bias)| {
+        let applied = cache.range_bias.update(bias, rows);
+        (image, applied)
+    });
+    let cur_applied = cache.range_bias.update(cur_bias, rows);
+    let ((prev_image, prev_surfaces), cur_surfaces) = rayon::join(
+        || match previous_to_fit {
+            Ok(done) => done,
+            Err((image, applied)) => {
+                let surfaces = Surfaces::estimate(previous, &image, &geometry, params, applied);
+                (image, surfaces)
+            }
+        },
+        || Surfaces::estimate(current, &cur_image, &geometry, params, cur_applied),
     );
     let result = compute_from_surfaces(
         pair,
@@ -360,6 +394,7 @@ fn compute_from_surfaces(
         incidence_cos: cur_surfaces.incidence_cos.clone(),
         normal: cur_surfaces.normal.clone(),
         range_noise_m_per_row,
+        range_bias_m_per_row: cur_surfaces.range_bias_m_per_row.clone(),
         dt_s: cells.dt_s,
         l_ego,
         point_threat,

@@ -27,6 +27,9 @@ pub struct Surfaces {
     /// Range noise of each row's laser (1 sigma), metres, estimated from the
     /// scan itself (`row_noise`).
     pub noise_m_per_row: Vec<f32>,
+    /// Range offset of each row's laser taken out of its returns, metres
+    /// (`bias::estimate`; all zero where the scan shows none).
+    pub range_bias_m_per_row: Vec<f32>,
     /// Columns of the image (cells per row).
     pub cols: usize,
 }
@@ -76,18 +79,12 @@ pub fn row_noise(image: &RangeImage, geometry: &ImageGeometry, default_m: f64) -
 /// measured per-laser bias out before fitting was tried: it moved no
 /// figure on the HDL-64E and cost 15 % of D's accuracy on the synthetic
 /// sensor, which has none.)
-fn noise_per_row(
-    scan: &Scan,
-    image: &RangeImage,
-    geometry: &ImageGeometry,
-    params: SurfaceParams,
-) -> Vec<f32> {
-    let along = row_noise(image, geometry, params.range_noise_m);
+fn noise_per_row(returns: &Returns, geometry: &ImageGeometry, params: SurfaceParams) -> Vec<f32> {
+    let along = row_noise(returns.image, geometry, params.range_noise_m);
     let loose = SurfaceParams {
         range_noise_m: LOOSE_NOISE_M,
         ..params
     };
-    let returns = Returns { scan, image };
     let scatter: Vec<f32> = (0..geometry.rows)
         .into_par_iter()
         .map_init(Scratch::default, |scratch, row| {
@@ -95,7 +92,7 @@ fn noise_per_row(
                 .step_by(NOISE_STRIDE)
                 .filter_map(|col| {
                     let (fit, _) = fit_window(
-                        &returns,
+                        returns,
                         geometry,
                         row * geometry.cols + col,
                         loose,
@@ -200,18 +197,26 @@ impl SurfaceParams {
 }
 
 impl Surfaces {
+    /// Surfaces of a gridded scan, with `range_bias_m_per_row` (one per row,
+    /// `bias::RangeBias`) taken out of the returns first.
     pub fn estimate(
         scan: &Scan,
         image: &RangeImage,
         geometry: &ImageGeometry,
         params: SurfaceParams,
+        range_bias_m_per_row: Vec<f32>,
     ) -> Self {
+        let returns = Returns {
+            scan,
+            image,
+            range_bias_m: &range_bias_m_per_row,
+            cols: geometry.cols,
+        };
         let noise_m_per_row = shrunk_to_sensor(if params.sparse_rows {
             row_noise(image, geometry, params.range_noise_m)
         } else {
-            noise_per_row(scan, image, geometry, params)
+            noise_per_row(&returns, geometry, params)
         });
-        let returns = Returns { scan, image };
         let params = SurfaceParams {
             ground_z_m: if params.sparse_rows {
                 ground_height(scan, image)
@@ -239,6 +244,7 @@ impl Surfaces {
             support: fitted.iter().map(|c| c.support).collect(),
             edge: fitted.iter().map(|c| c.edge).collect(),
             noise_m_per_row,
+            range_bias_m_per_row,
             cols: geometry.cols,
         }
     }
@@ -266,11 +272,15 @@ const EMPTY: CellSurface = CellSurface {
     edge: false,
 };
 
-/// The returns of one image, by cell.
+/// The returns of one image, by cell, with each laser's range offset taken
+/// out.
 #[derive(Clone, Copy)]
 struct Returns<'a> {
     scan: &'a Scan,
     image: &'a RangeImage,
+    /// Per row, metres (empty: none).
+    range_bias_m: &'a [f32],
+    cols: usize,
 }
 
 impl Returns<'_> {
@@ -278,7 +288,14 @@ impl Returns<'_> {
         let index = self.image.point[cell];
         (index != NO_POINT).then(|| {
             let p = self.scan.points_m[index as usize];
-            Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            match self.range_bias_m.get(cell / self.cols) {
+                Some(&bias) if bias != 0.0 => {
+                    let range = p.norm();
+                    p * ((range - f64::from(bias)).max(0.0) / range)
+                }
+                _ => p,
+            }
         })
     }
 }
@@ -594,7 +611,9 @@ fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
 
 /// [`fit_plane`] plus the RMS spread of the points within the plane (the
 /// smaller in-plane axis).
-fn fit_plane_spread(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+pub(super) fn fit_plane_spread(
+    points: &[Vector3<f64>],
+) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
     if points.len() < 4 {
         return None;
     }

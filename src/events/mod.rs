@@ -9,6 +9,7 @@ mod cluster;
 mod corridor;
 mod listing;
 
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::engine::{ImageGeometry, PairLooming};
@@ -183,6 +184,8 @@ struct Track {
     stamps: Vec<(i64, u64)>,
     /// Near range of the cluster in the last hot pair, with that pair's stamp.
     last_near_range: (i64, f64),
+    /// The cluster's looming in the last hot pair, 1/s.
+    last_looming_per_s: f64,
 }
 
 /// Follows hot clusters over pairs and reports near-miss events.
@@ -224,10 +227,12 @@ impl EventDetector {
         let (pair, looming) = (frame.pair, frame.looming);
         let scan: &Scan = &pair.current;
         let stamp_ns = scan.stamp_ns;
-        let velocity = pair.motion.velocity_at(stamp_ns);
+        // The motion the engine used: a source's, or the one it estimated
+        // from the static world where no source measured it.
+        let velocity = looming.velocity_mps.map(Vector3::from);
         let corridor = Corridor::new(
             velocity,
-            pair.motion.angular_velocity_at(stamp_ns),
+            looming.angular_velocity_radps.map(Vector3::from),
             self.config.corridor_half_width_m,
         );
         self.frame_id.clone_from(&scan.frame_id);
@@ -377,6 +382,7 @@ impl Track {
             cells: 0,
             stamps: Vec::new(),
             last_near_range: (sample.stamp_ns, cluster.near_range_m),
+            last_looming_per_s: cluster.looming_per_s,
         };
         track.extend(sample);
         track.update(cluster, sample);
@@ -389,9 +395,12 @@ impl Track {
         rows_meet && self.cols.overlaps(&cluster.cols, margin_cols)
     }
 
-    /// Whether `cluster`, seen in a later pair, looms no faster than twice
-    /// the rate at which its near range closed since this track's last pair
-    /// (plus 0.3 1/s for the noise of a range percentile).
+    /// Whether `cluster`, seen in a later pair, and this track's last
+    /// cluster both loom no faster than twice the rate at which the near
+    /// range closed between them (plus 0.3 1/s for the noise of a range
+    /// percentile). Both ends: a track's first cluster has nothing before it
+    /// to be checked against (on a real HDL-64E log a hedge beside the path
+    /// read 16 1/s at 2 m in one pair, its range unchanged in the next).
     fn plausible(&self, cluster: &Cluster, sample: &Sample) -> bool {
         let (stamp_ns, near_range_m) = self.last_near_range;
         let dt_s = (sample.stamp_ns - stamp_ns) as f64 * 1e-9;
@@ -399,7 +408,8 @@ impl Track {
             return true;
         }
         let closing_per_s = (near_range_m - cluster.near_range_m) / (dt_s * cluster.near_range_m);
-        cluster.looming_per_s <= 2.0 * closing_per_s + PLAUSIBILITY_SLACK_PER_S
+        let bound_per_s = 2.0 * closing_per_s + PLAUSIBILITY_SLACK_PER_S;
+        cluster.looming_per_s <= bound_per_s && self.last_looming_per_s <= bound_per_s
     }
 
     /// Count a hot pair (once per pair, whatever the number of clusters).
@@ -425,6 +435,7 @@ impl Track {
     /// Fold a cluster of the current pair in.
     fn update(&mut self, cluster: &Cluster, sample: &Sample) {
         self.last_near_range = (sample.stamp_ns, cluster.near_range_m);
+        self.last_looming_per_s = cluster.looming_per_s;
         self.cols = cluster.cols;
         self.rows = cluster.rows;
         self.max_cells = self.max_cells.max(cluster.cells);
@@ -627,6 +638,20 @@ mod tests {
         assert_eq!(events.len(), 1);
         assert_eq!(events[0].hot_pairs, 2, "{:?}", events[0]);
         assert!((events[0].peak_looming_per_s - 8.0 / 3.4).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_first_cluster_the_next_range_belies_does_not_start_an_event() {
+        // A hedge 2 m beside the path: one pair reads 16 1/s, the next pair
+        // sees it at the same range reading 1 1/s. Neither end is an approach
+        // at 16 1/s, so the track is not continued and no event starts.
+        let hedge_spike = cluster(16.0, 2.0);
+        let hedge_after = cluster(1.0, 1.98);
+        assert!(detect(&[Some(hedge_spike), Some(hedge_after.clone())]).is_empty());
+        // The same second pair after a first one that its range bears out is
+        // an event.
+        let events = detect(&[Some(cluster(1.0, 2.1)), Some(hedge_after)]);
+        assert_eq!(events.len(), 1);
     }
 
     #[test]
