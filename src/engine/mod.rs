@@ -225,23 +225,28 @@ pub fn compute_with_cache(
     // Each scan's offsets join the sensor's running estimate in time order
     // (the previous scan first, when it was not cached).
     let correct = config.correct_range_bias;
-    let scan_bias = |scan: &Scan, image: &RangeImage| {
-        correct
+    let scan_bias = |scan: &Scan, image: &RangeImage, wanted: bool| {
+        (correct && wanted)
             .then(|| bias::estimate(scan, image, &geometry))
             .flatten()
     };
+    let previous_ahead = u64::from(cached.is_none());
+    let (want_previous, want_current) = (
+        cache.range_bias.wants_estimate(0),
+        cache.range_bias.wants_estimate(previous_ahead),
+    );
     let (previous_gridded, (cur_image, cur_bias)) = rayon::join(
         || match cached {
             Some(c) => Ok((c.image, c.surfaces)),
             None => {
                 let image = RangeImage::build(previous, &geometry);
-                let bias = scan_bias(previous, &image);
+                let bias = scan_bias(previous, &image, want_previous);
                 Err((image, bias))
             }
         },
         || {
             let image = RangeImage::build(current, &geometry);
-            let bias = scan_bias(current, &image);
+            let bias = scan_bias(current, &image, want_current);
             (image, bias)
         },
     );

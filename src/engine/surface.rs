@@ -206,12 +206,7 @@ impl Surfaces {
         params: SurfaceParams,
         range_bias_m_per_row: Vec<f32>,
     ) -> Self {
-        let returns = Returns {
-            scan,
-            image,
-            range_bias_m: &range_bias_m_per_row,
-            cols: geometry.cols,
-        };
+        let returns = Returns::new(scan, image, geometry.cols, &range_bias_m_per_row);
         let noise_m_per_row = shrunk_to_sensor(if params.sparse_rows {
             row_noise(image, geometry, params.range_noise_m)
         } else {
@@ -273,30 +268,48 @@ const EMPTY: CellSurface = CellSurface {
 };
 
 /// The returns of one image, by cell, with each laser's range offset taken
-/// out.
-#[derive(Clone, Copy)]
+/// out: positions and ranges computed once per scan, as every cell's window
+/// reads its neighbours' many times over.
 struct Returns<'a> {
-    scan: &'a Scan,
     image: &'a RangeImage,
-    /// Per row, metres (empty: none).
-    range_bias_m: &'a [f32],
-    cols: usize,
+    /// Per cell, metres (NaN: empty).
+    points: Vec<Vector3<f64>>,
+    /// `|points[cell]|`, metres (NaN: empty).
+    ranges: Vec<f64>,
 }
 
-impl Returns<'_> {
-    fn point(&self, cell: usize) -> Option<Vector3<f64>> {
-        let index = self.image.point[cell];
-        (index != NO_POINT).then(|| {
-            let p = self.scan.points_m[index as usize];
-            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-            match self.range_bias_m.get(cell / self.cols) {
-                Some(&bias) if bias != 0.0 => {
-                    let range = p.norm();
-                    p * ((range - f64::from(bias)).max(0.0) / range)
+impl<'a> Returns<'a> {
+    fn new(scan: &Scan, image: &'a RangeImage, cols: usize, range_bias_m: &[f32]) -> Self {
+        let points: Vec<Vector3<f64>> = image
+            .point
+            .par_iter()
+            .enumerate()
+            .map(|(cell, &index)| {
+                if index == NO_POINT {
+                    return Vector3::repeat(f64::NAN);
                 }
-                _ => p,
-            }
-        })
+                let p = scan.points_m[index as usize];
+                let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+                match range_bias_m.get(cell / cols) {
+                    Some(&bias) if bias != 0.0 => {
+                        let range = p.norm();
+                        p * ((range - f64::from(bias)).max(0.0) / range)
+                    }
+                    _ => p,
+                }
+            })
+            .collect();
+        let ranges = points.iter().map(|p| p.norm()).collect();
+        Self {
+            image,
+            points,
+            ranges,
+        }
+    }
+
+    fn point(&self, cell: usize) -> Option<Vector3<f64>> {
+        let p = self.points[cell];
+        (!p.x.is_nan()).then_some(p)
     }
 }
 
@@ -362,10 +375,22 @@ fn fit_window(
     points.clear();
     points.push(center);
     let mut far_neighbours = 0;
-    for n in geometry.neighbours(cell, half_rows, half_cols) {
-        if let Some(p) = returns.point(n) {
-            if (p.norm() - range).abs() <= 0.3 * range + 0.5 {
-                points.push(p);
+    let gate_m = 0.3 * range + 0.5;
+    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
+    for r in row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1) {
+        for offset in 0..=2 * half_cols {
+            // Columns wrap around the sweep.
+            let c = (col + cols + offset - half_cols) % cols;
+            let n = r * cols + c;
+            if n == cell {
+                continue;
+            }
+            let neighbour_range = returns.ranges[n];
+            if neighbour_range.is_nan() {
+                continue;
+            }
+            if (neighbour_range - range).abs() <= gate_m {
+                points.push(returns.points[n]);
             } else {
                 far_neighbours += 1;
             }
@@ -578,12 +603,20 @@ const RING_HALF_WINDOW: usize = 3;
 const LEVEL_TANGENT_Z: f64 = 0.3;
 
 /// Centroid and scatter matrix (sum of outer products about it) of points.
+/// The six distinct sums by hand: this runs for every window of every cell.
 fn scatter(points: &[Vector3<f64>]) -> (Vector3<f64>, Matrix3<f64>) {
     let centroid = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
-    let covariance = points.iter().fold(Matrix3::zeros(), |acc, p| {
-        let d = p - centroid;
-        acc + d * d.transpose()
-    });
+    let [mut xx, mut xy, mut xz, mut yy, mut yz, mut zz] = [0.0; 6];
+    for p in points {
+        let (x, y, z) = (p.x - centroid.x, p.y - centroid.y, p.z - centroid.z);
+        xx += x * x;
+        xy += x * y;
+        xz += x * z;
+        yy += y * y;
+        yz += y * z;
+        zz += z * z;
+    }
+    let covariance = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
     (centroid, covariance)
 }
 
@@ -631,25 +664,51 @@ pub(super) fn fit_plane_spread(
     ))
 }
 
-/// Eigenvalues of a symmetric 3x3 matrix, ascending, in closed form (the
-/// trigonometric solution of the characteristic cubic): much cheaper than an
-/// iterative solver in the per-cell inner loop.
+/// Eigenvalues of a symmetric positive semi-definite 3x3 matrix (a scatter
+/// matrix), ascending. The smallest by Newton's method on the characteristic
+/// polynomial from 0: below the smallest root the polynomial is increasing
+/// and concave, so the iteration climbs to it without overshooting, in two
+/// or three steps for a plane (its smallest eigenvalue far below the
+/// others); the other two from the trace and the sum of principal minors.
+/// No trigonometry: this runs for every window of every cell (the closed
+/// form's acos and cos were a tenth of the engine's time).
 fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)> {
-    let p1 = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
-    let q = a.trace() / 3.0;
-    let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
-    let p = (p2 / 6.0).sqrt();
-    if !(p.is_finite()) || p == 0.0 {
-        return Some((q, q, q));
+    let trace = a.trace();
+    let minors = a[(0, 0)] * a[(1, 1)] - a[(0, 1)].powi(2) + a[(0, 0)] * a[(2, 2)]
+        - a[(0, 2)].powi(2)
+        + a[(1, 1)] * a[(2, 2)]
+        - a[(1, 2)].powi(2);
+    let det = a.determinant();
+    if !(trace.is_finite() && minors.is_finite() && det.is_finite()) {
+        return None;
     }
-    let b = (a - Matrix3::identity() * q) / p;
-    let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
-    let phi = r.acos() / 3.0;
-    let largest = q + 2.0 * p * phi.cos();
-    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
-    let middle = 3.0 * q - largest - smallest;
-    Some((smallest, middle, largest))
+    let mut smallest = 0.0f64;
+    if minors > 0.0 && det > 0.0 {
+        for _ in 0..NEWTON_STEPS {
+            let value = ((smallest - trace) * smallest + minors) * smallest - det;
+            let slope = (3.0 * smallest - 2.0 * trace) * smallest + minors;
+            if slope <= 0.0 {
+                break;
+            }
+            let step = value / slope;
+            smallest -= step;
+            if step.abs() <= 1e-14 * trace {
+                break;
+            }
+        }
+    }
+    // The other two: sum `trace - smallest`, product `minors - smallest * sum`.
+    let sum = trace - smallest;
+    let product = minors - smallest * sum;
+    let half_gap = (0.25 * sum * sum - product).max(0.0).sqrt();
+    let middle = 0.5 * sum - half_gap;
+    let largest = 0.5 * sum + half_gap;
+    Some((smallest, middle.max(smallest), largest))
 }
+
+/// Newton steps at most for the smallest eigenvalue (a plane needs 2-3; two
+/// equal small eigenvalues, a line, converge linearly).
+const NEWTON_STEPS: usize = 30;
 
 /// A unit vector in the null space of a (nearly) singular symmetric matrix: the
 /// largest cross product of two of its rows.
@@ -698,7 +757,43 @@ mod tests {
     }
 
     #[test]
-    fn closed_form_eigenvalues_match_a_diagonal_matrix() {
+    fn eigenvalues_match_nalgebras_on_scatter_matrices() {
+        // Scatter matrices of windows on planes (one small eigenvalue), of
+        // isotropic clouds and of lines, against nalgebra's iterative solver.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for case in 0..300 {
+            let thickness = [1e-4, 0.02, 1.0][case % 3];
+            let width = if case % 7 == 0 { 1e-6 } else { 0.3 };
+            let points: Vec<Vector3<f64>> = (0..15)
+                .map(|_| Vector3::new(uniform(), uniform() * width, uniform() * thickness))
+                .collect();
+            let (_, covariance) = scatter(&points);
+            let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
+            let mut expected: Vec<f64> = covariance
+                .symmetric_eigen()
+                .eigenvalues
+                .iter()
+                .copied()
+                .collect();
+            expected.sort_by(f64::total_cmp);
+            let scale = expected[2];
+            for (found, want) in [a, b, c].iter().zip(&expected) {
+                assert!(
+                    (found - want).abs() <= 1e-9 * scale,
+                    "{case}: {a} {b} {c} vs {expected:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn eigenvalues_of_a_diagonal_matrix_are_its_diagonal() {
         let m = Matrix3::from_diagonal(&Vector3::new(3.0, 1.0, 2.0));
         let (a, b, c) = symmetric_eigenvalues(&m).unwrap();
         assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12 && (c - 3.0).abs() < 1e-12);
