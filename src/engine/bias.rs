@@ -72,7 +72,7 @@ impl RangeBias {
     /// then one in [`REESTIMATE_EVERY`].
     pub fn wants_estimate(&self, ahead: u64) -> bool {
         let index = self.seen + ahead;
-        self.scans < AVERAGE_SCANS || index % REESTIMATE_EVERY == 0
+        self.scans < AVERAGE_SCANS || index.is_multiple_of(REESTIMATE_EVERY)
     }
 
     /// Fold one scan's estimate in (None: not estimated; a changed row count
