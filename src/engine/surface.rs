@@ -30,6 +30,9 @@ pub struct Surfaces {
     /// Range offset of each row's laser taken out of its returns, metres
     /// (`bias::estimate`; all zero where the scan shows none).
     pub range_bias_m_per_row: Vec<f32>,
+    /// Per cell, the neighbours it shares a surface with in the mesh the
+    /// renderer builds (`warp::mesh_joins`).
+    pub joins: Vec<u8>,
     /// Columns of the image (cells per row).
     pub cols: usize,
 }
@@ -231,7 +234,7 @@ impl Surfaces {
                 fit_cell(&returns, geometry, cell, params, scratch)
             })
             .collect();
-        Self {
+        let mut surfaces = Self {
             range_m: fitted.iter().map(|c| c.range_m).collect(),
             direction: fitted.iter().map(|c| c.direction).collect(),
             normal: fitted.iter().map(|c| c.normal).collect(),
@@ -240,8 +243,11 @@ impl Surfaces {
             edge: fitted.iter().map(|c| c.edge).collect(),
             noise_m_per_row,
             range_bias_m_per_row,
+            joins: Vec::new(),
             cols: geometry.cols,
-        }
+        };
+        surfaces.joins = super::warp::mesh_joins(&surfaces, geometry.rows, geometry.cols);
+        surfaces
     }
 }
 

@@ -230,7 +230,7 @@ fn fill_dropouts(
             let (Some(a), Some(b)) = (vertices[left], vertices[right]) else {
                 continue;
             };
-            if !same_surface(source, left, right) || (a.col - b.col).abs() > 3.0 {
+            if !same_surface(source.surfaces, left, right) || (a.col - b.col).abs() > 3.0 {
                 continue;
             }
             vertices[cell] = Some(Vertex {
@@ -246,10 +246,50 @@ fn fill_dropouts(
     proxy
 }
 
+/// Which neighbours each cell shares a surface with (`same_surface`), for
+/// the mesh's triangle edges: bit [`JOIN_RIGHT`] the next column, bit
+/// [`JOIN_DOWN`] the next row, bit [`JOIN_ANTI`] the next column's cell
+/// with the next row's (the diagonal both triangles of a quad share). A
+/// property of the scan alone: computed once with its surfaces, read by
+/// every render of it (two per pair, up to eight more to estimate a motion).
+pub(super) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usize) -> Vec<u8> {
+    (0..rows * cols)
+        .into_par_iter()
+        .map(|cell| {
+            let (row, col) = (cell / cols, cell % cols);
+            let here = surfaces.range_m[cell].is_finite();
+            let right = row * cols + (col + 1) % cols;
+            let mut joins = 0;
+            if here && surfaces.range_m[right].is_finite() && same_surface(surfaces, cell, right) {
+                joins |= JOIN_RIGHT;
+            }
+            if row + 1 < rows {
+                let down = cell + cols;
+                if here && surfaces.range_m[down].is_finite() && same_surface(surfaces, cell, down)
+                {
+                    joins |= JOIN_DOWN;
+                }
+                // The diagonal does not involve this cell: an empty cell's
+                // neighbours still share the quad's other triangle.
+                if surfaces.range_m[right].is_finite()
+                    && surfaces.range_m[down].is_finite()
+                    && same_surface(surfaces, right, down)
+                {
+                    joins |= JOIN_ANTI;
+                }
+            }
+            joins
+        })
+        .collect()
+}
+
+pub(super) const JOIN_RIGHT: u8 = 1;
+pub(super) const JOIN_DOWN: u8 = 2;
+pub(super) const JOIN_ANTI: u8 = 4;
+
 /// Whether two neighbouring source cells lie on one surface (so a triangle
 /// between them is real and not a bridge across an occlusion).
-fn same_surface(source: &Source, a: usize, b: usize) -> bool {
-    let s = source.surfaces;
+fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
     let point = |c: usize| {
         let d = s.direction[c];
         Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * f64::from(s.range_m[c])
@@ -292,15 +332,27 @@ fn rasterize_row(
         let b = row * cols + next;
         let c = (row + 1) * cols + col;
         let d = (row + 1) * cols + next;
-        for [i, j, k] in [[a, b, c], [b, d, c]] {
+        let joins = &source.surfaces.joins;
+        // Each edge with the table's verdict for its two cells (`mesh_joins`),
+        // which holds where neither is a bridged dropout.
+        let ab = (a, b, joins[a] & JOIN_RIGHT != 0);
+        let ac = (a, c, joins[a] & JOIN_DOWN != 0);
+        let bc = (b, c, joins[a] & JOIN_ANTI != 0);
+        let bd = (b, d, joins[b] & JOIN_DOWN != 0);
+        let dc = (c, d, joins[c] & JOIN_RIGHT != 0);
+        for ([i, j, k], edges) in [([a, b, c], [ab, bc, ac]), ([b, d, c], [bd, dc, bc])] {
             let (Some(vi), Some(vj), Some(vk)) = (vertices[i], vertices[j], vertices[k]) else {
                 continue;
             };
-            let on_one_surface = |a: usize, b: usize| {
-                let (a, b) = (proxy[a] as usize, proxy[b] as usize);
-                a == b || same_surface(source, a, b)
+            let on_one_surface = |(x, y, joined): (usize, usize, bool)| {
+                let (px, py) = (proxy[x] as usize, proxy[y] as usize);
+                if px == x && py == y {
+                    joined
+                } else {
+                    px == py || same_surface(source.surfaces, px, py)
+                }
             };
-            if !(on_one_surface(i, j) && on_one_surface(j, k) && on_one_surface(i, k)) {
+            if !edges.into_iter().all(on_one_surface) {
                 continue;
             }
             let edge = [i, j, k]
@@ -333,7 +385,7 @@ fn rasterize_ring(
             continue;
         };
         let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);
-        if pa != pb && !same_surface(source, pa, pb) {
+        if pa != pb && !same_surface(source.surfaces, pa, pb) {
             continue;
         }
         let edge = source.surfaces.edge[pa] || source.surfaces.edge[pb];
