@@ -506,7 +506,7 @@ fn with_constant_motion(
 fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
     image
         .point
-        .iter()
+        .par_iter()
         .map(|&index| {
             if index == NO_POINT {
                 return scan.stamp_ns;
@@ -524,7 +524,7 @@ fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
 fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)> {
     surfaces
         .direction
-        .iter()
+        .par_iter()
         .zip(&surfaces.range_m)
         .map(|(d, &range_m)| {
             let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
@@ -543,6 +543,7 @@ fn column_times(
     geometry: &ImageGeometry,
 ) -> Vec<StampNs> {
     (0..geometry.cols)
+        .into_par_iter()
         .map(|col| {
             let mut times: Vec<StampNs> = (0..geometry.rows)
                 .map(|row| row * geometry.cols + col)
@@ -604,7 +605,7 @@ fn per_cell(
         })
         .collect();
     let candidate: Vec<bool> = raw
-        .iter()
+        .par_iter()
         .map(|r| {
             let d = r.l_lidar - r.l_ray_ego;
             r.mask == 0
@@ -617,6 +618,7 @@ fn per_cell(
     // one-beam line (what the junction of road and wall leaves): keep
     // candidates with two candidate neighbours, one of them on another beam.
     let moving: Vec<bool> = (0..geometry.cells())
+        .into_par_iter()
         .map(|cell| {
             let row = cell / geometry.cols;
             candidate[cell]
