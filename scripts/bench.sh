@@ -3,14 +3,16 @@
 # same log (the floor): the table of docs/performance.md. Outside CI.
 #
 # Usage: bash scripts/bench.sh
-#   Synthesizes the safe-drive scenario at 64 beams x 2048 columns (60 s,
-#   600 scans, ~1.9 GB), then times, each alone:
+#   For each resolution (32 x 512, then 64 x 2048), synthesizes the
+#   safe-drive scenario (60 s, 600 scans; ~1.9 GB at 64 x 2048), then times,
+#   each alone:
 #     copy     target/release/examples/mcap_copy IN OUT   (mcap crate, zstd
 #              level 3, 4 MiB chunks: the same compression as `looming process`)
 #     process  looming process IN -o OUT --force -q --json-summary S.json
 #     full     the same with --fields full
-#   and prints a Markdown table (also written to $BENCH_DIR/bench-table.md).
-#   The full run takes ~10 minutes on 2 cores and needs ~10 GB free in BENCH_DIR.
+#   and prints Markdown tables per resolution (also written to
+#   $BENCH_DIR/bench-table.md, and per resolution to $BENCH_DIR/BxC/).
+#   The full run takes ~12 minutes on 2 cores and needs ~10 GB free in BENCH_DIR.
 #
 # Environment:
 #   BENCH_DIR       working directory (default target/bench); relative paths
@@ -18,6 +20,7 @@
 #   BENCH_DURATION  drive length in seconds, passed to `synth --duration`
 #                   (default: the scenario's 60 s); e.g. 10 for a quick trial
 #   BENCH_KEEP=1    keep the MCAP files (by default each is deleted once measured)
+#   BENCH_RESOLUTIONS  beams x columns to run (default "32x512 64x2048")
 #
 # Measured with /usr/bin/time -v (wall time, user + sys CPU, maximum resident
 # set size), else with a Python wrapper reading the same from resource.getrusage.
@@ -94,33 +97,11 @@ PY
   }
 fi
 
-input=$dir/safe-drive-64x2048.mcap
-log "synthesizing $input ${duration_args[*]:-(60 s)}"
-measure synth "$looming" synth --scenario safe-drive --beams 64 --columns 2048 \
-  "${duration_args[@]}" -o "$input" --force -q
-stat -c %s "$input" > "$dir/input.bytes"
-"$sizes" "$input" > "$dir/input.sizes"
-
-log "copy (mcap crate, the floor)"
-measure copy "$copy" "$input" "$dir/copy.mcap"
-stat -c %s "$dir/copy.mcap" > "$dir/copy.bytes"
-[ "$keep" = 1 ] || rm -f "$dir/copy.mcap"
-
-for run in process full; do
-  fields=()
-  [ "$run" = full ] && fields=(--fields full)
-  log "looming process ${fields[*]:-}"
-  measure "$run" "$looming" process "$input" -o "$dir/$run.mcap" --force -q \
-    --json-summary "$dir/$run.json" "${fields[@]}"
-  stat -c %s "$dir/$run.mcap" > "$dir/$run.bytes"
-  "$sizes" "$dir/$run.mcap" > "$dir/$run.sizes"
-  [ "$keep" = 1 ] || rm -f "$dir/$run.mcap"
-done
-[ "$keep" = 1 ] || rm -f "$input"
-
-python3 - "$dir" "$(nproc)" > "$dir/bench-table.md" <<'PY'
+# table DIR BEAMS COLUMNS: the Markdown tables of one resolution's runs.
+table() {
+  python3 - "$1" "$(nproc)" "$2" "$3" <<'PY'
 import json, sys
-d, cores = sys.argv[1], sys.argv[2]
+d, cores, beams, columns = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
 SCAN_HZ = 10.0
 
 def read_time(name):
@@ -146,7 +127,7 @@ synth_wall = read_time("synth")[0]
 cw, _, crss = t["copy"]
 commit = open(f"{d}/commit").read().strip()
 
-print(f"safe-drive 64 x 2048, {scans} scans ({scans / SCAN_HZ:.0f} s at {SCAN_HZ:.0f} Hz), "
+print(f"safe-drive {beams} x {columns}, {scans} scans ({scans / SCAN_HZ:.0f} s at {SCAN_HZ:.0f} Hz), "
       f"input {in_bytes / 1e6:.0f} MB; {cores} cores; commit {commit}; synth took {synth_wall:.0f} s.")
 print()
 print("| run | wall s | CPU s | other CPU s | scans/s | x real time | time / copy | peak RSS MiB | RSS / copy | output MB | output / input |")
@@ -193,14 +174,59 @@ print()
 print(f"`/lidar/points` alone: {lidar / 1e6:.0f} MB zstd, {inp['/lidar/points'][0] / 1e6:.0f} MB raw; "
       f"`/truth/*`: {sum(z for k, (_, z) in inp.items() if k.startswith('/truth/')) / 1e6:.0f} MB zstd.")
 PY
-cat "$dir/bench-table.md"
-for r in process full; do
-  python3 - "$dir/$r.json" "$r" <<'PY' >&2
+}
+
+# One resolution: synthesize, copy, process, process --fields full, each
+# measured; files in $rdir.
+measure_resolution() {
+  local beams=$1 columns=$2
+  rdir=$dir/${beams}x${columns}
+  mkdir -p "$rdir"
+  cp "$dir/commit" "$rdir/commit"
+  local saved_dir=$dir
+  dir=$rdir
+  input=$dir/safe-drive-${beams}x${columns}.mcap
+  log "synthesizing $input (${beams} x ${columns}) ${duration_args[*]:-(60 s)}"
+  measure synth "$looming" synth --scenario safe-drive --beams "$beams" --columns "$columns" \
+    "${duration_args[@]}" -o "$input" --force -q
+  stat -c %s "$input" > "$dir/input.bytes"
+  "$sizes" "$input" > "$dir/input.sizes"
+
+  log "copy (mcap crate, the floor)"
+  measure copy "$copy" "$input" "$dir/copy.mcap"
+  stat -c %s "$dir/copy.mcap" > "$dir/copy.bytes"
+  [ "$keep" = 1 ] || rm -f "$dir/copy.mcap"
+
+  for run in process full; do
+    fields=()
+    [ "$run" = full ] && fields=(--fields full)
+    log "looming process ${fields[*]:-}"
+    measure "$run" "$looming" process "$input" -o "$dir/$run.mcap" --force -q \
+      --json-summary "$dir/$run.json" "${fields[@]}"
+    stat -c %s "$dir/$run.mcap" > "$dir/$run.bytes"
+    "$sizes" "$dir/$run.mcap" > "$dir/$run.sizes"
+    [ "$keep" = 1 ] || rm -f "$dir/$run.mcap"
+  done
+  [ "$keep" = 1 ] || rm -f "$input"
+  table "$dir" "$beams" "$columns" > "$dir/bench-table.md"
+  dir=$saved_dir
+}
+
+
+: > "$dir/bench-table.md"
+for resolution in ${BENCH_RESOLUTIONS:-32x512 64x2048}; do
+  measure_resolution "${resolution%x*}" "${resolution#*x}"
+  cat "$rdir/bench-table.md" >> "$dir/bench-table.md"
+  echo >> "$dir/bench-table.md"
+  for r in process full; do
+    python3 - "$rdir/$r.json" "$r" <<'PY' >&2
 import json, sys
 s = json.load(open(sys.argv[1]))
 w = s["warnings"] + s["input_report"]["warnings"]
 if w or s["bad_messages"]:
     print(f"bench: {sys.argv[2]}: {s['bad_messages']} bad messages, warnings: {w}")
 PY
+  done
 done
+cat "$dir/bench-table.md"
 log "table written to $dir/bench-table.md"
