@@ -106,12 +106,16 @@ impl RangeBias {
     }
 }
 
+/// Most rows estimated: the dense solve grows with the cube of the rows (a
+/// ring field may claim up to 1024 rings; real heads have at most 128).
+const MAX_ROWS: usize = 256;
+
 /// One scan's range offset of each row's laser, metres (positive: the laser
 /// reads long); None on sparse sensors (rows too far apart to share a
-/// plane) and images of fewer than three rows.
+/// plane) and images of fewer than three or more than [`MAX_ROWS`] rows.
 pub fn estimate(scan: &Scan, image: &RangeImage, geometry: &ImageGeometry) -> Option<Vec<f64>> {
     let rows = geometry.rows;
-    if rows < 3 || geometry.sparse_rows() {
+    if !(3..=MAX_ROWS).contains(&rows) || geometry.sparse_rows() {
         return None;
     }
     let second: Vec<Option<(f64, f64)>> = (0..rows)
