@@ -510,3 +510,53 @@ fn a_processed_log_is_refused_unless_replace_which_writes_fresh_channels() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A copy of `input` with only the LiDAR and the transforms: no IMU, no
+/// velocity source.
+fn lidar_only(input: &Path, output: &Path) {
+    let bytes = std::fs::read(input).unwrap();
+    let mut writer = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(output).unwrap(),
+        ))
+        .unwrap();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let topic = message.channel.topic.as_str();
+        if topic == "/lidar/points" || topic.starts_with("/tf") || topic.starts_with("/truth") {
+            writer.write(&message).unwrap();
+        }
+    }
+    writer.finish().unwrap();
+}
+
+#[test]
+fn on_a_lidar_only_log_the_near_miss_is_judged_with_the_estimated_motion() {
+    // Without a velocity source the engine estimates the motion from the
+    // static world; the near-miss corridor and the ego speed must come from
+    // that estimate (they once came from the missing source: the LiDAR's x
+    // axis and no speed).
+    let dir = scratch("annotate-lidar-only-events");
+    let full = synth(&dir, "cut-in", &["--start", "2", "--duration", "5"]);
+    let input = dir.join("cut-in-lidar-only.mcap");
+    lidar_only(&full, &input);
+    let output = dir.join("cut-in-lidar-only-out.mcap");
+    let events_path = dir.join("events.json");
+    process(
+        &input,
+        &output,
+        &["--events", events_path.to_str().unwrap()],
+    );
+    let file: looming::events::EventsFile =
+        serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
+    assert_eq!(file.events.len(), 1, "{:?}", file.events);
+    let event = &file.events[0];
+    assert_eq!(event.corridor, looming::events::PathSource::EgoMotion);
+    // The planted near miss: TTC about 1 s from 2.9 s, the ego at 12 m/s
+    // braking from 2.9 s.
+    let speed = event.peak.ego_speed_mps.expect("the estimated speed");
+    assert!((3.0..=12.5).contains(&speed), "{speed}");
+    assert!(event.min_time_to_contact_s < 1.5, "{event:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
