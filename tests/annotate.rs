@@ -394,13 +394,7 @@ fn near_misses_are_reported_where_planted_and_nowhere_else() {
         let input = synth(&dir, scenario, &[]);
         let output = dir.join(format!("{scenario}-out.mcap"));
         let events_path = dir.join(format!("{scenario}-events.json"));
-        process(
-            &input,
-            &output,
-            &["--events", events_path.to_str().unwrap()],
-        );
-        let file: looming::events::EventsFile =
-            serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
+        let file = process_events(&input, &output, &events_path);
         let contents = read_all(&std::fs::read(&input).unwrap());
         let truth: Vec<serde_json::Value> = contents
             .topic_messages("/truth/events")
@@ -511,24 +505,20 @@ fn a_processed_log_is_refused_unless_replace_which_writes_fresh_channels() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A copy of `input` with only the LiDAR and the transforms: no IMU, no
-/// velocity source.
+/// A copy of `input` with only the LiDAR, the transforms and the truth: no
+/// IMU, no velocity source.
 fn lidar_only(input: &Path, output: &Path) {
-    let bytes = std::fs::read(input).unwrap();
-    let mut writer = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(std::io::BufWriter::new(
-            std::fs::File::create(output).unwrap(),
-        ))
-        .unwrap();
-    for message in mcap::MessageStream::new(&bytes).unwrap() {
-        let message = message.unwrap();
+    common::rewrite_mcap(input, output, |message| {
         let topic = message.channel.topic.as_str();
-        if topic == "/lidar/points" || topic.starts_with("/tf") || topic.starts_with("/truth") {
-            writer.write(&message).unwrap();
-        }
-    }
-    writer.finish().unwrap();
+        (topic == "/lidar/points" || topic.starts_with("/tf") || topic.starts_with("/truth"))
+            .then_some(message)
+    });
+}
+
+/// `process INPUT OUTPUT --events FILE`, and the events it wrote.
+fn process_events(input: &Path, output: &Path, events_path: &Path) -> looming::events::EventsFile {
+    process(input, output, &["--events", events_path.to_str().unwrap()]);
+    serde_json::from_slice(&std::fs::read(events_path).unwrap()).unwrap()
 }
 
 #[test]
@@ -541,15 +531,11 @@ fn on_a_lidar_only_log_the_near_miss_is_judged_with_the_estimated_motion() {
     let full = synth(&dir, "cut-in", &["--start", "2", "--duration", "5"]);
     let input = dir.join("cut-in-lidar-only.mcap");
     lidar_only(&full, &input);
-    let output = dir.join("cut-in-lidar-only-out.mcap");
-    let events_path = dir.join("events.json");
-    process(
+    let file = process_events(
         &input,
-        &output,
-        &["--events", events_path.to_str().unwrap()],
+        &dir.join("cut-in-lidar-only-out.mcap"),
+        &dir.join("events.json"),
     );
-    let file: looming::events::EventsFile =
-        serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
     assert_eq!(file.events.len(), 1, "{:?}", file.events);
     let event = &file.events[0];
     assert_eq!(event.corridor, looming::events::PathSource::EgoMotion);

@@ -162,23 +162,14 @@ fn a_rolled_extrinsic_offsets_the_whole_ground() {
 /// A copy of `input` whose `/imu/data` gyro reports an extra roll rate.
 fn with_roll_rate(input: &Path, output: &Path, roll_rate_radps: f64) {
     use looming::ros::msgs::Imu;
-    let bytes = std::fs::read(input).unwrap();
-    let mut writer = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(std::io::BufWriter::new(
-            std::fs::File::create(output).unwrap(),
-        ))
-        .unwrap();
-    for message in mcap::MessageStream::new(&bytes).unwrap() {
-        let mut message = message.unwrap();
+    common::rewrite_mcap(input, output, |mut message| {
         if message.channel.topic == "/imu/data" {
             let mut imu = Imu::decode_cdr(&message.data).unwrap();
             imu.angular_velocity.x += roll_rate_radps;
             message.data = Cow::Owned(imu.encode_cdr(false));
         }
-        writer.write(&message).unwrap();
-    }
-    writer.finish().unwrap();
+        Some(message)
+    });
 }
 
 #[test]

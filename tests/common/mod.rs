@@ -250,3 +250,25 @@ pub fn looming_quality(output: &Path, json: &Path) -> (serde_json::Value, String
     let report = serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap();
     (report, text)
 }
+
+/// A copy of the MCAP `input` at `output` (ROS 2 profile), each message
+/// through `edit`: returned (possibly changed) it is written, `None` drops it.
+pub fn rewrite_mcap(
+    input: &Path,
+    output: &Path,
+    mut edit: impl FnMut(mcap::Message<'_>) -> Option<mcap::Message<'_>>,
+) {
+    let bytes = std::fs::read(input).unwrap();
+    let mut writer = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(output).unwrap(),
+        ))
+        .unwrap();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        if let Some(message) = edit(message.unwrap()) {
+            writer.write(&message).unwrap();
+        }
+    }
+    writer.finish().unwrap();
+}
