@@ -191,7 +191,7 @@ pub struct QualityTotals {
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
     /// `ground_split`, `ground_offset`, `ground_split_d`, `ground_offset_d`, `ground_moving`,
-    /// `low_trust`, `no_ground`, `no_quality`.
+    /// `low_trust`, `range_offsets`, `no_ground`, `no_quality`.
     pub code: String,
     pub message: String,
 }
@@ -561,6 +561,12 @@ fn mask_hint(name: &str) -> &'static str {
     }
 }
 
+/// Per-laser range offsets worth saying (metres): RMS over the lasers, or
+/// one laser's. The engine takes them out either way; above these the
+/// sensor's own calibration deserves a look (KITTI's HDL-64E: 2.1 cm RMS).
+const OFFSETS_RMS_LIMIT_M: f64 = 0.015;
+const OFFSETS_MAX_LIMIT_M: f64 = 0.05;
+
 fn diagnose(t: &QualityTotals) -> Vec<Diagnosis> {
     let mut out = Vec::new();
     if t.pairs_with_quality == 0 {
@@ -608,6 +614,20 @@ fn diagnose(t: &QualityTotals) -> Vec<Diagnosis> {
                  static-world prediction is wrong on the ground: check the ego motion (velocity, \
                  extrinsic, times)",
                 100.0 * fraction
+            ),
+        });
+    }
+    if let (Some(rms), Some(max)) = (t.range_offsets.rms_m, t.range_offsets.max_abs_m)
+        && (rms > OFFSETS_RMS_LIMIT_M || max > OFFSETS_MAX_LIMIT_M)
+    {
+        out.push(Diagnosis {
+            code: "range_offsets".into(),
+            message: format!(
+                "the lasers read ranges offset from each other by {:.1} cm RMS, up to {:.1} cm \
+                 (taken out by the engine, estimated from the scans): the sensor's per-laser \
+                 calibration is off by that much",
+                100.0 * rms,
+                100.0 * max
             ),
         });
     }
@@ -886,6 +906,31 @@ mod tests {
                 .contains("vertical velocity / pitch error")
         );
         assert!(r.diagnoses[0].message.contains("time offset"));
+    }
+
+    #[test]
+    fn large_laser_offsets_are_reported() {
+        let with_offsets = |offsets: Vec<f32>| {
+            let pairs = (0..3)
+                .map(|i| {
+                    let mut p = pair(i, 0.004, -0.003, 90);
+                    if let Some(q) = p.quality.as_mut() {
+                        q.range_offset_m_per_ring = offsets.clone();
+                    }
+                    p
+                })
+                .collect();
+            report(pairs)
+        };
+        let r = with_offsets(vec![0.02, -0.03, 0.01]);
+        assert_eq!(codes(&r), ["range_offsets"]);
+        assert!(
+            r.diagnoses[0].message.contains("2.2 cm RMS, up to 3.0 cm"),
+            "{}",
+            r.diagnoses[0].message
+        );
+        assert!(codes(&with_offsets(vec![0.0, 0.0, 0.0])).is_empty());
+        assert!(codes(&with_offsets(vec![0.005, -0.005, 0.0])).is_empty());
     }
 
     #[test]
