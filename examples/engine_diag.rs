@@ -118,12 +118,7 @@ impl Totals {
                 .map(|c| r.normal[c][2].clamp(-1.0, 1.0).acos().to_degrees())
                 .collect();
             tilts.sort_by(f32::total_cmp);
-            let q = |f: f64| {
-                tilts
-                    .get((f * tilts.len() as f64) as usize)
-                    .copied()
-                    .unwrap_or(f32::NAN)
-            };
+            let q = |f: f64| quantile(&tilts, f);
             println!(
                 "  ground normal tilt deg p50 {:.1} p75 {:.1} p90 {:.1} of {}",
                 q(0.5),
@@ -284,12 +279,7 @@ impl Totals {
         {
             values.retain(|v| v.is_finite());
             values.sort_by(f32::total_cmp);
-            let q = |f: f64| {
-                values
-                    .get((f * values.len() as f64) as usize)
-                    .copied()
-                    .unwrap_or(f32::NAN)
-            };
+            let q = |f: f64| quantile(values, f);
             println!(
                 "ground {name:10} p10 {:+.4} p25 {:+.4} p50 {:+.4} p75 {:+.4} p90 {:+.4}",
                 q(0.1),
@@ -332,13 +322,18 @@ impl Totals {
     }
 }
 
+/// The `f` quantile of sorted values (NaN when empty).
+fn quantile(sorted: &[f32], f: f64) -> f32 {
+    sorted
+        .get((f * sorted.len() as f64) as usize)
+        .copied()
+        .unwrap_or(f32::NAN)
+}
+
 fn median(values: &mut Vec<f32>) -> f32 {
     values.retain(|v| v.is_finite());
-    if values.is_empty() {
-        return f32::NAN;
-    }
     values.sort_by(f32::total_cmp);
-    values[values.len() / 2]
+    quantile(values, 0.5)
 }
 
 /// The mask as a picture, 3 pixels per row: trusted green, edge red,

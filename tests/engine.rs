@@ -30,9 +30,28 @@ fn eval_scenario_at(
     ));
     std::fs::create_dir_all(&dir).unwrap();
     let output = dir.join("drive.mcap");
+    synthesize_drive(name, &output, (start_s, end_s), (beams, columns));
+    let report = evaluate(&output, config).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(report.pairs >= 9, "{name}: {} pairs", report.pairs);
+    report
+}
+
+fn stats(report: &EvalReport, quantity: &str, class: &str) -> Summary {
+    report.errors[quantity][class]
+}
+
+/// The built-in scenario `name` from `start_s` to `end_s` (seed 7) at
+/// `beams` x `columns`, written to `output`.
+fn synthesize_drive(
+    name: &str,
+    output: &std::path::Path,
+    (start_s, end_s): (f64, f64),
+    (beams, columns): (u16, u32),
+) {
     synthesize(&SynthOptions {
         scenario: name.into(),
-        output: output.clone(),
+        output: output.to_path_buf(),
         seed: 7,
         start_s: Some(start_s),
         duration_s: Some(end_s),
@@ -44,14 +63,6 @@ fn eval_scenario_at(
         },
     })
     .unwrap();
-    let report = evaluate(&output, config).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
-    assert!(report.pairs >= 9, "{name}: {} pairs", report.pairs);
-    report
-}
-
-fn stats(report: &EvalReport, quantity: &str, class: &str) -> Summary {
-    report.errors[quantity][class]
 }
 
 #[test]
@@ -242,20 +253,7 @@ fn the_motion_is_estimated_from_the_static_world_where_no_source_measured_it() {
     let dir = std::env::temp_dir().join(format!("looming-egomotion-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join("turn.mcap");
-    synthesize(&SynthOptions {
-        scenario: "urban-turn".into(),
-        output: log.clone(),
-        seed: 7,
-        start_s: Some(0.0),
-        duration_s: Some(1.0),
-        beams: Some(32),
-        columns: Some(512),
-        output_options: OutputOptions {
-            force: true,
-            ..OutputOptions::default()
-        },
-    })
-    .unwrap();
+    synthesize_drive("urban-turn", &log, (0.0, 1.0), (32, 512));
     let mut pairs = Vec::new();
     looming::replay::replay(&log, &mut |_| {}, &mut |pair| pairs.push(pair)).unwrap();
     let _ = std::fs::remove_dir_all(&dir);

@@ -287,6 +287,19 @@ pub(super) const JOIN_RIGHT: u8 = 1;
 pub(super) const JOIN_DOWN: u8 = 2;
 pub(super) const JOIN_ANTI: u8 = 4;
 
+/// Whether the mesh edge between source cells `x` and `y` lies on one
+/// surface: the scan's table (`joined`, from [`mesh_joins`]) where neither
+/// vertex stands in for a bridged dropout, else the cells the vertices
+/// stand for, judged now.
+fn on_one_surface(source: &Source, proxy: &[u32], (x, y): (usize, usize), joined: bool) -> bool {
+    let (px, py) = (proxy[x] as usize, proxy[y] as usize);
+    if px == x && py == y {
+        joined
+    } else {
+        px == py || same_surface(source.surfaces, px, py)
+    }
+}
+
 /// Whether two neighbouring source cells lie on one surface (so a triangle
 /// between them is real and not a bridge across an occlusion).
 fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
@@ -344,15 +357,10 @@ fn rasterize_row(
             let (Some(vi), Some(vj), Some(vk)) = (vertices[i], vertices[j], vertices[k]) else {
                 continue;
             };
-            let on_one_surface = |(x, y, joined): (usize, usize, bool)| {
-                let (px, py) = (proxy[x] as usize, proxy[y] as usize);
-                if px == x && py == y {
-                    joined
-                } else {
-                    px == py || same_surface(source.surfaces, px, py)
-                }
-            };
-            if !edges.into_iter().all(on_one_surface) {
+            if !edges
+                .into_iter()
+                .all(|(x, y, joined)| on_one_surface(source, proxy, (x, y), joined))
+            {
                 continue;
             }
             let edge = [i, j, k]
@@ -384,10 +392,11 @@ fn rasterize_ring(
         let (Some(va), Some(vb)) = (vertices[a], vertices[b]) else {
             continue;
         };
-        let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);
-        if pa != pb && !same_surface(source.surfaces, pa, pb) {
+        let joined = source.surfaces.joins[a] & JOIN_RIGHT != 0;
+        if !on_one_surface(source, proxy, (a, b), joined) {
             continue;
         }
+        let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);
         let edge = source.surfaces.edge[pa] || source.surfaces.edge[pb];
         let unwrap = |c: f64, near: f64| {
             if c - near > cols as f64 / 2.0 {
