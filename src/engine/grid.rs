@@ -3,6 +3,7 @@
 //! return. Also the continuous (row, column) coordinates of any direction, used
 //! to render warped scans into the image.
 
+use rayon::prelude::*;
 use std::f64::consts::{PI, TAU};
 
 use crate::messages::Scan;
@@ -64,7 +65,9 @@ impl ImageGeometry {
         if n < 2 || range_m.is_nan() || range_m <= 0.0 {
             return self.row_f(elevation_rad);
         }
-        let at = |k: usize| beams[k] + parallax[k] / range_m;
+        // One division per return, not one per probe of the search.
+        let inverse_range = 1.0 / range_m;
+        let at = |k: usize| beams[k] + parallax[k] * inverse_range;
         // Rows are in elevation order at any range the model holds; a
         // binary search over the beams evaluated at this range.
         let (mut lo, mut hi) = (0usize, n);
@@ -238,7 +241,7 @@ pub fn geometry_for(
     }
     let elevations: Vec<f32> = current
         .points_m
-        .iter()
+        .par_iter()
         .map(|p| angles(p).1 as f32)
         .collect();
     let beams = BeamTable::infer(&elevations, 256)?;
@@ -271,9 +274,17 @@ fn most_points_per_row(rows_of_points: impl Iterator<Item = usize>, rows: usize)
 fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>, Option<Vec<f64>>)> {
     let rings = scan.ring.as_ref()?;
     let mut per_ring: Vec<Vec<(f32, f32)>> = vec![Vec::new(); rows];
-    for (p, &ring) in scan.points_m.iter().zip(rings) {
-        let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        per_ring[usize::from(ring)].push((1.0 / range, angles(p).1 as f32));
+    // The angles on both cores (an `atan2` per return), then bucketed in order.
+    let values: Vec<(f32, f32)> = scan
+        .points_m
+        .par_iter()
+        .map(|p| {
+            let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            (1.0 / range, angles(p).1 as f32)
+        })
+        .collect();
+    for (value, &ring) in values.into_iter().zip(rings) {
+        per_ring[usize::from(ring)].push(value);
     }
     let mut known: Vec<(usize, ElevationModel)> = Vec::new();
     for (row, values) in per_ring.iter_mut().enumerate() {

@@ -26,6 +26,7 @@ mod surface;
 pub mod threat;
 pub mod trajectory;
 mod warp;
+mod window_sums;
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -523,13 +524,13 @@ fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
 /// Continuous (row, column) of each occupied cell's ray.
 fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)> {
     surfaces
-        .direction
+        .elevation_rad
         .par_iter()
+        .zip(&surfaces.azimuth_rad)
         .zip(&surfaces.range_m)
-        .map(|(d, &range_m)| {
-            let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
-            let row = geometry.row_f_at(z.atan2(x.hypot(y)), f64::from(range_m));
-            let col = geometry.col_f(y.atan2(x));
+        .map(|((&elevation_rad, &azimuth_rad), &range_m)| {
+            let row = geometry.row_f_at(elevation_rad, f64::from(range_m));
+            let col = geometry.col_f(azimuth_rad);
             (row as f32, col as f32)
         })
         .collect()

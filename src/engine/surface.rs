@@ -7,6 +7,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::grid::{ImageGeometry, NO_POINT, RangeImage};
+use super::window_sums::RowSums;
 use crate::messages::Scan;
 
 /// Per cell of one image.
@@ -33,6 +34,12 @@ pub struct Surfaces {
     /// Per cell, the neighbours it shares a surface with in the mesh the
     /// renderer builds (`warp::mesh_joins`).
     pub joins: Vec<u8>,
+    /// Azimuth and elevation of each cell's return (of `direction`), radians
+    /// (NaN empty): computed once per scan, as each render of the scan
+    /// turns them by its motion (`warp`) instead of taking three `atan2`
+    /// per return.
+    pub azimuth_rad: Vec<f64>,
+    pub elevation_rad: Vec<f64>,
     /// Columns of the image (cells per row).
     pub cols: usize,
 }
@@ -244,11 +251,30 @@ impl Surfaces {
             noise_m_per_row,
             range_bias_m_per_row,
             joins: Vec::new(),
+            azimuth_rad: Vec::new(),
+            elevation_rad: Vec::new(),
             cols: geometry.cols,
         };
         surfaces.joins = super::warp::mesh_joins(&surfaces, geometry.rows, geometry.cols);
+        (surfaces.azimuth_rad, surfaces.elevation_rad) = direction_angles(&surfaces);
         surfaces
     }
+}
+
+/// Azimuth and elevation of each cell's `direction` (NaN where empty).
+fn direction_angles(surfaces: &Surfaces) -> (Vec<f64>, Vec<f64>) {
+    surfaces
+        .direction
+        .par_iter()
+        .zip(&surfaces.range_m)
+        .map(|(d, range)| {
+            if !range.is_finite() {
+                return (f64::NAN, f64::NAN);
+            }
+            let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
+            (y.atan2(x), z.atan2(x.hypot(y)))
+        })
+        .unzip()
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -282,6 +308,8 @@ struct Returns<'a> {
     points: Vec<Vector3<f64>>,
     /// `|points[cell]|`, metres (NaN: empty).
     ranges: Vec<f64>,
+    /// Running sums of `points` along each row, for the windows' scatter.
+    sums: RowSums,
 }
 
 impl<'a> Returns<'a> {
@@ -306,10 +334,12 @@ impl<'a> Returns<'a> {
             })
             .collect();
         let ranges = points.iter().map(|p| p.norm()).collect();
+        let sums = RowSums::new(&points, cols);
         Self {
             image,
             points,
             ranges,
+            sums,
         }
     }
 
@@ -366,12 +396,16 @@ fn fit_window(
     geometry: &ImageGeometry,
     cell: usize,
     params: SurfaceParams,
-    (half_rows, half_cols): (usize, usize),
+    window: (usize, usize),
     scratch: &mut Scratch,
 ) -> (CellSurface, Option<f64>) {
     let Some(center) = returns.point(cell) else {
         return (EMPTY, None);
     };
+    if let Some(fitted) = fit_whole_window(returns, geometry, cell, &center, params, window) {
+        return fitted;
+    }
+    let (half_rows, half_cols) = window;
     let raw = raw_surface(&center);
     let (range, direction) = (center.norm(), center / center.norm());
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
@@ -443,6 +477,90 @@ fn fit_window(
         ..oriented(&center, &centroid, normal, tolerance)
     };
     (surface, Some(spread))
+}
+
+/// [`fit_window`]'s fit where every return of the window passes the range
+/// gate and lies on the plane fitted to them all (most windows): the
+/// window's scatter from the running row sums, and one pass over its
+/// ranges and, unless the plane's scatter alone shows every return within
+/// tolerance, its points. None where the window needs the full fit (a
+/// return beyond the gate or off the plane, fewer than four returns, no
+/// plane, or a window wider than the image).
+fn fit_whole_window(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    center: &Vector3<f64>,
+    params: SurfaceParams,
+    (half_rows, half_cols): (usize, usize),
+) -> Option<(CellSurface, Option<f64>)> {
+    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
+    let window_rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
+    let range = center.norm();
+    let gate_m = 0.3 * range + 0.5;
+    let mut moments = super::window_sums::Moments::default();
+    for r in window_rows.clone() {
+        moments = moments.plus(&returns.sums.window(r, col, half_cols)?);
+        let beyond_gate = window_columns(r * cols, col, half_cols, cols)
+            .flat_map(|span| &returns.ranges[span])
+            .any(|&neighbour| (neighbour - range).abs() > gate_m);
+        if beyond_gate {
+            return None;
+        }
+    }
+    if moments.count < 4.0 {
+        return None;
+    }
+    let (centroid, covariance) = moments.scatter()?;
+    let plane = plane_of_scatter(moments.count, centroid, &covariance)?;
+    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
+    // The squared distances to the plane sum to its smallest scatter, so
+    // none exceeds the tolerance when that sum does not.
+    if plane.smallest > WHOLE_WINDOW_MARGIN * tolerance * tolerance {
+        let off_plane = window_rows
+            .flat_map(|r| window_columns(r * cols, col, half_cols, cols))
+            .flat_map(|span| &returns.points[span])
+            .any(|p| !p.x.is_nan() && (p - plane.centroid).dot(&plane.normal).abs() > tolerance);
+        if off_plane {
+            return None;
+        }
+    }
+    let direction = center / range;
+    let surface = CellSurface {
+        residual_m: (center - plane.centroid).dot(&(-facing_sensor(plane.normal, &direction)))
+            as f32,
+        support: (moments.count as usize).min(255) as u8,
+        edge: false,
+        ..oriented(center, &plane.centroid, plane.normal, tolerance)
+    };
+    Some((surface, Some(plane.spread)))
+}
+
+/// Below this fraction of the squared tolerance, a plane's smallest scatter
+/// shows every return on it without looking (a margin for the rounding of
+/// the running sums).
+const WHOLE_WINDOW_MARGIN: f64 = 0.999;
+
+/// The cell ranges (one or two, as the window wraps around the sweep) of
+/// the columns `col - half_cols ..= col + half_cols` of the row starting at
+/// cell `row_start`.
+fn window_columns(
+    row_start: usize,
+    col: usize,
+    half_cols: usize,
+    cols: usize,
+) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let (first, second) = if col >= half_cols && col + half_cols < cols {
+        (col - half_cols..col + half_cols + 1, 0..0)
+    } else if col < half_cols {
+        (0..col + half_cols + 1, cols + col - half_cols..cols)
+    } else {
+        (col - half_cols..cols, 0..col + half_cols + 1 - cols)
+    };
+    [first, second]
+        .into_iter()
+        .filter(|span| !span.is_empty())
+        .map(move |span| row_start + span.start..row_start + span.end)
 }
 
 /// A return with no surface fitted: its raw range and direction.
@@ -657,17 +775,38 @@ pub(super) fn fit_plane_spread(
         return None;
     }
     let (centroid, covariance) = scatter(points);
-    let (smallest, middle, largest) = symmetric_eigenvalues(&covariance)?;
+    let plane = plane_of_scatter(points.len() as f64, centroid, &covariance)?;
+    Some((plane.normal, plane.centroid, plane.spread))
+}
+
+/// A plane fitted to `count` points by their centroid and scatter matrix.
+struct Plane {
+    normal: Vector3<f64>,
+    centroid: Vector3<f64>,
+    /// RMS spread of the points within the plane (the smaller in-plane axis).
+    spread: f64,
+    /// Smallest eigenvalue of the scatter: the sum of the points' squared
+    /// distances to the plane.
+    smallest: f64,
+}
+
+fn plane_of_scatter(
+    count: f64,
+    centroid: Vector3<f64>,
+    covariance: &Matrix3<f64>,
+) -> Option<Plane> {
+    let (smallest, middle, largest) = symmetric_eigenvalues(covariance)?;
     // Collinear points (one row only) do not define a plane.
     if largest.is_nan() || largest <= 0.0 || middle < 1e-3 * largest || !smallest.is_finite() {
         return None;
     }
     let normal = null_vector(&(covariance - Matrix3::identity() * smallest))?;
-    Some((
+    Some(Plane {
         normal,
         centroid,
-        (middle.max(0.0) / points.len() as f64).sqrt(),
-    ))
+        spread: (middle.max(0.0) / count).sqrt(),
+        smallest,
+    })
 }
 
 /// Eigenvalues of a symmetric positive semi-definite 3x3 matrix (a scatter
@@ -729,11 +868,17 @@ fn null_vector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
         rows[0].cross(&rows[2]),
         rows[1].cross(&rows[2]),
     ];
-    let best = candidates
-        .iter()
-        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
-    let norm = best.norm();
-    (norm > 0.0 && norm.is_finite()).then(|| best / norm)
+    // The largest (the last of equals, in total order), without an iterator.
+    let mut best = 0;
+    let mut best_norm_squared = candidates[0].norm_squared();
+    for (k, candidate) in candidates.iter().enumerate().skip(1) {
+        let norm_squared = candidate.norm_squared();
+        if norm_squared.total_cmp(&best_norm_squared).is_ge() {
+            (best, best_norm_squared) = (k, norm_squared);
+        }
+    }
+    let norm = best_norm_squared.sqrt();
+    (norm > 0.0 && norm.is_finite()).then(|| candidates[best] / norm)
 }
 
 #[cfg(test)]

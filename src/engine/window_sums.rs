@@ -1,0 +1,217 @@
+//! Running sums of a range image's returns along each row, so that the
+//! count, centroid and scatter matrix of the returns in any window of the
+//! image come from a few lookups per row instead of a pass over its
+//! returns: the plane fits read windows of 15 to 91 returns around every
+//! cell, most returns many times over.
+//!
+//! The sums are of raw coordinates (the LiDAR frame), so a window's scatter
+//! is `sum(p p^T) - n c c^T`, exact to about 1e-8 m^2 over a row of 2048
+//! returns at up to 100 m: a thousandth of a plane fit's smallest scatter
+//! at a noise of 5 mm, and a millionth of a radian on its normal.
+
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// Sums over a set of returns: the count, the coordinates and their
+/// products (`xx, xy, xz, yy, yz, zz`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Moments {
+    pub count: f64,
+    pub sum: [f64; 3],
+    pub products: [f64; 6],
+}
+
+impl Moments {
+    fn of_point(p: &Vector3<f64>) -> Self {
+        Self {
+            count: 1.0,
+            sum: [p.x, p.y, p.z],
+            products: [
+                p.x * p.x,
+                p.x * p.y,
+                p.x * p.z,
+                p.y * p.y,
+                p.y * p.z,
+                p.z * p.z,
+            ],
+        }
+    }
+
+    pub fn plus(&self, other: &Self) -> Self {
+        let mut out = *self;
+        out.count += other.count;
+        for (a, b) in out.sum.iter_mut().zip(&other.sum) {
+            *a += b;
+        }
+        for (a, b) in out.products.iter_mut().zip(&other.products) {
+            *a += b;
+        }
+        out
+    }
+
+    fn minus(&self, other: &Self) -> Self {
+        let mut out = *self;
+        out.count -= other.count;
+        for (a, b) in out.sum.iter_mut().zip(&other.sum) {
+            *a -= b;
+        }
+        for (a, b) in out.products.iter_mut().zip(&other.products) {
+            *a -= b;
+        }
+        out
+    }
+
+    /// Centroid and scatter matrix (sum of outer products about it); None
+    /// for no returns.
+    pub fn scatter(&self) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+        if self.count < 1.0 {
+            return None;
+        }
+        let centroid = Vector3::from(self.sum) / self.count;
+        let [xx, xy, xz, yy, yz, zz] = self.products;
+        let n = self.count;
+        let (cx, cy, cz) = (centroid.x, centroid.y, centroid.z);
+        let covariance = Matrix3::new(
+            xx - n * cx * cx,
+            xy - n * cx * cy,
+            xz - n * cx * cz,
+            xy - n * cx * cy,
+            yy - n * cy * cy,
+            yz - n * cy * cz,
+            xz - n * cx * cz,
+            yz - n * cy * cz,
+            zz - n * cz * cz,
+        );
+        Some((centroid, covariance))
+    }
+}
+
+/// Per row, the running sums of its returns' moments over its columns.
+pub(super) struct RowSums {
+    cols: usize,
+    /// `(cols + 1)` entries per row: entry `c` sums the row's columns `0..c`.
+    running: Vec<Moments>,
+}
+
+impl RowSums {
+    /// Sums of `points` (one per cell, row-major; NaN for an empty cell).
+    pub fn new(points: &[Vector3<f64>], cols: usize) -> Self {
+        let rows = points.len() / cols.max(1);
+        let per_row: Vec<Vec<Moments>> = (0..rows)
+            .into_par_iter()
+            .map(|row| {
+                let mut running = Vec::with_capacity(cols + 1);
+                let mut total = Moments::default();
+                running.push(total);
+                for p in &points[row * cols..(row + 1) * cols] {
+                    if !p.x.is_nan() {
+                        total = total.plus(&Moments::of_point(p));
+                    }
+                    running.push(total);
+                }
+                running
+            })
+            .collect();
+        Self {
+            cols,
+            running: per_row.concat(),
+        }
+    }
+
+    /// Moments of `row`'s returns in columns `col - half_cols ..= col +
+    /// half_cols` (wrapping around the sweep); None when the window is wider
+    /// than the image.
+    pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<Moments> {
+        let cols = self.cols;
+        if 2 * half_cols + 1 > cols || col >= cols {
+            return None;
+        }
+        let base = row * (cols + 1);
+        let span = |from: usize, to: usize| {
+            self.running
+                .get(base + to)
+                .zip(self.running.get(base + from))
+                .map(|(to, from)| to.minus(from))
+        };
+        if col >= half_cols && col + half_cols < cols {
+            span(col - half_cols, col + half_cols + 1)
+        } else if col < half_cols {
+            // Wraps past column 0: the start of the row and its end.
+            let head = span(0, col + half_cols + 1)?;
+            let tail = span(cols + col - half_cols, cols)?;
+            Some(head.plus(&tail))
+        } else {
+            let head = span(col - half_cols, cols)?;
+            let tail = span(0, col + half_cols + 1 - cols)?;
+            Some(head.plus(&tail))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn direct(points: &[Vector3<f64>], cells: impl Iterator<Item = usize>) -> Moments {
+        cells
+            .map(|c| points[c])
+            .filter(|p| !p.x.is_nan())
+            .fold(Moments::default(), |m, p| m.plus(&Moments::of_point(&p)))
+    }
+
+    #[test]
+    fn windows_match_direct_sums_including_across_the_seam() {
+        let (rows, cols) = (3, 16);
+        let points: Vec<Vector3<f64>> = (0..rows * cols)
+            .map(|i| {
+                if i % 7 == 3 {
+                    Vector3::repeat(f64::NAN)
+                } else {
+                    let f = i as f64;
+                    Vector3::new(10.0 + f.sin(), f * 0.25, -1.5 + 0.01 * f)
+                }
+            })
+            .collect();
+        let sums = RowSums::new(&points, cols);
+        for row in 0..rows {
+            for col in 0..cols {
+                for half in [0, 1, 3, 7] {
+                    let cells = (0..=2 * half).map(|k| row * cols + (col + cols + k - half) % cols);
+                    let expected = direct(&points, cells);
+                    let got = sums.window(row, col, half).expect("fits the image");
+                    assert_eq!(got.count, expected.count);
+                    for (a, b) in got
+                        .sum
+                        .iter()
+                        .chain(&got.products)
+                        .zip(expected.sum.iter().chain(&expected.products))
+                    {
+                        assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()), "{a} vs {b}");
+                    }
+                }
+            }
+        }
+        assert!(sums.window(0, 0, 8).is_none(), "wider than the image");
+    }
+
+    #[test]
+    fn the_scatter_of_moments_is_the_centred_scatter() {
+        let points = [
+            Vector3::new(20.0, 1.0, -1.7),
+            Vector3::new(20.1, 1.2, -1.69),
+            Vector3::new(19.9, 1.1, -1.71),
+            Vector3::new(20.05, 0.9, -1.7),
+        ];
+        let moments = points
+            .iter()
+            .fold(Moments::default(), |m, p| m.plus(&Moments::of_point(p)));
+        let (centroid, scatter) = moments.scatter().expect("points");
+        let mean = points.iter().sum::<Vector3<f64>>() / 4.0;
+        let centred: Matrix3<f64> = points
+            .iter()
+            .map(|p| (p - mean) * (p - mean).transpose())
+            .sum();
+        assert!((centroid - mean).norm() < 1e-12);
+        assert!((scatter - centred).abs().max() < 1e-10);
+    }
+}
