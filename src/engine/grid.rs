@@ -164,12 +164,19 @@ impl RangeImage {
         let cells = geometry.cells();
         let mut range_m = vec![f32::NAN; cells];
         let mut point = vec![NO_POINT; cells];
-        let mut point_cell = vec![NO_POINT; scan.points_m.len()];
-        for (index, p) in scan.points_m.iter().enumerate() {
-            let Some(cell) = cell_of(scan, index, p, geometry) else {
+        // Each point's cell on both cores (angles per point), then the
+        // nearest return per cell in point order.
+        let point_cell: Vec<u32> = scan
+            .points_m
+            .par_iter()
+            .enumerate()
+            .map(|(index, p)| cell_of(scan, index, p, geometry).map_or(NO_POINT, |c| c as u32))
+            .collect();
+        for (index, (p, &cell)) in scan.points_m.iter().zip(&point_cell).enumerate() {
+            if cell == NO_POINT {
                 continue;
-            };
-            point_cell[index] = cell as u32;
+            }
+            let cell = cell as usize;
             let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
             // Nearest return wins; ties keep the earlier point (deterministic).
             if range_m[cell].is_nan() || r < range_m[cell] {
@@ -203,10 +210,11 @@ impl RangeImage {
 }
 
 fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) -> Option<usize> {
-    let (azimuth, elevation) = angles(p);
+    let azimuth = f64::from(p[1]).atan2(f64::from(p[0]));
     let row = match (&scan.ring, &geometry.ring_to_row) {
         (Some(rings), Some(ring_to_row)) => *ring_to_row.get(usize::from(rings[index]))?,
-        _ => geometry.beams.row_of(elevation),
+        // The elevation only where no ring gives the row.
+        _ => geometry.beams.row_of(angles(p).1),
     };
     (row < geometry.rows).then(|| row * geometry.cols + geometry.col_of(azimuth))
 }
@@ -286,12 +294,11 @@ fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>, O
     for (value, &ring) in values.into_iter().zip(rings) {
         per_ring[usize::from(ring)].push(value);
     }
-    let mut known: Vec<(usize, ElevationModel)> = Vec::new();
-    for (row, values) in per_ring.iter_mut().enumerate() {
-        if let Some(model) = ElevationModel::fit(values) {
-            known.push((row, model));
-        }
-    }
+    let known: Vec<(usize, ElevationModel)> = per_ring
+        .par_iter_mut()
+        .enumerate()
+        .filter_map(|(row, values)| ElevationModel::fit(values).map(|model| (row, model)))
+        .collect();
     if known.len() < 2 {
         return None;
     }
@@ -431,8 +438,9 @@ impl ElevationModel {
             .iter()
             .map(|&(u, e)| (f64::from(e) - model.elevation_at(1.0 / f64::from(u))).abs())
             .collect();
-        residuals.sort_by(f64::total_cmp);
-        let gate = 3.0 * 1.4826 * residuals[residuals.len() / 2] + 1e-5;
+        let mid = residuals.len() / 2;
+        let median_residual = *residuals.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let gate = 3.0 * 1.4826 * median_residual + 1e-5;
         let first = model;
         model = least_squares(
             samples.iter().filter_map(|&(u, e)| {
