@@ -29,12 +29,17 @@
 #      Every /looming/points message is decoded with protobuf from the schema the
 #      channel declares (encoding `protobuf`, FileDescriptorSet, `foxglove.PointCloud`):
 #      fields x,y,z (FLOAT32) and red,green,blue,alpha (UINT8), point_stride * N == len(data).
+#      Every /looming/image/* message is decoded as `foxglove.CompressedImage` with
+#      format `png`, and its PNG with Pillow: RGB, the same size in every message.
 #   2. Rerun: `rerun mcap convert` turns the MCAP into an .rrd (the importer the
 #      viewer uses when it opens an .mcap), `rerun rrd verify` must pass, and the
 #      recording is read back with `rerun.chunk.RrdReader`: entity /looming/points
 #      must carry Points3D:positions and Points3D:colors, one row per MCAP message,
 #      the same number of points per message, and, for the first message, the same
-#      coordinates and RGBA values as decoded from the MCAP.
+#      coordinates and RGBA values as decoded from the MCAP. Entities
+#      /looming/image/* must carry EncodedImage:blob with media type image/png, one
+#      row per MCAP message, the first blob byte-identical to the MCAP's PNG (the
+#      viewer decodes it with the `image` crate, as tests/annotate.rs does).
 #   It ends with a table: topic, messages, and what Rerun made of the topic.
 set -euo pipefail
 caller=$PWD
@@ -94,7 +99,7 @@ trap 'rm -rf "$work"' EXIT
 rrd=${LOOMING_VIEWER_RRD:-$work/recording.rrd}
 
 cat > "$work/check.py" <<'PY'
-import collections, importlib.metadata, os, subprocess, sys, zlib
+import collections, importlib.metadata, io, os, subprocess, sys, zlib
 
 import numpy as np
 import pyarrow as pa
@@ -103,12 +108,14 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema, Statistics
 from mcap.stream_reader import StreamReader, breakup_chunk
+from PIL import Image
 
 MCAP, RRD, HINT = sys.argv[1], sys.argv[2], sys.argv[3]
 POINTS = "/looming/points"
 NEED_MESSAGES = [POINTS, "/looming/disagreement", "/looming/threat", "/looming/threat_zones",
                  "/looming/image/fused", "/looming/image/disagreement"]
 NEED_CHANNEL = ["/looming/events", "/looming/log"]
+IMAGES = ["/looming/image/fused", "/looming/image/disagreement"]
 FLOAT32, UINT8 = 7, 1  # foxglove.PackedElementField.NumericType
 
 
@@ -144,6 +151,8 @@ schemas, channels, classes = {}, {}, {}
 counts = collections.Counter()          # channel id -> messages
 points_per_message = []                 # (log_time, n) for every /looming/points message
 first_cloud = None                      # (log_time, xyz float32 [N,3], rgba uint32 [N])
+first_png = {}                          # image topic -> (log_time, PNG bytes)
+image_sizes = collections.defaultdict(set)  # image topic -> {(width, height)}
 crc_chunks = 0
 data_crc = summary_crc_checked = False
 footer = stats = None
@@ -187,6 +196,27 @@ def check_cloud(msg, log_time):
         first_cloud = (log_time, xyz, (r << 24) | (g << 16) | (b << 8) | a, cloud.frame_id, cloud.point_stride)
 
 
+def check_image(msg, log_time):
+    ch = channels[msg.channel_id]
+    schema = schemas.get(ch.schema_id)
+    if (schema is None or schema.encoding != "protobuf" or schema.name != "foxglove.CompressedImage"
+            or ch.message_encoding != "protobuf"):
+        fail(f"{ch.topic}: expected protobuf foxglove.CompressedImage, channel declares message encoding "
+             f"{ch.message_encoding!r}, schema {getattr(schema, 'name', None)!r}")
+    if schema.id not in classes:
+        classes[schema.id] = message_class(schema)
+    image = classes[schema.id].FromString(msg.data)
+    if image.format != "png":
+        fail(f"{ch.topic} @ {log_time}: format {image.format!r}, expected 'png'")
+    try:
+        decoded = Image.open(io.BytesIO(image.data))
+        decoded = decoded.convert("RGB")
+    except Exception as e:
+        fail(f"{ch.topic} @ {log_time}: the PNG does not decode: {type(e).__name__}: {e}")
+    image_sizes[ch.topic].add(decoded.size)
+    first_png.setdefault(ch.topic, (log_time, bytes(image.data)))
+
+
 def handle(rec):
     global footer, stats, data_crc
     if isinstance(rec, Schema):
@@ -203,6 +233,8 @@ def handle(rec):
         counts[rec.channel_id] += 1
         if channels[rec.channel_id].topic == POINTS:
             check_cloud(rec, rec.log_time)
+        elif channels[rec.channel_id].topic in IMAGES:
+            check_image(rec, rec.log_time)
     elif isinstance(rec, Statistics):
         stats = rec
     elif isinstance(rec, DataEnd):
@@ -273,6 +305,12 @@ t0, xyz0, rgba0, frame0, stride0 = first_cloud
 mcap_n = collections.defaultdict(list)      # log_time -> point counts of the messages at that time
 for t, n in points_per_message:
     mcap_n[t].append(n)
+for topic in IMAGES:
+    if len(image_sizes[topic]) != 1:
+        fail(f"{topic}: image sizes {sorted(image_sizes[topic])}, expected one size for the whole log")
+    (width, height), = image_sizes[topic]
+    say(f"mcap {topic}: {by_topic[topic]} messages decoded as foxglove.CompressedImage, "
+        f"PNGs of {width} x {height} (Pillow)")
 say(f"mcap {POINTS}: {len(points_per_message)} messages decoded as foxglove.PointCloud, "
     f"{sum(n for _, n in points_per_message)} points; first: {len(xyz0)} points, stride {stride0}, "
     f"frame_id {frame0!r}")
@@ -323,6 +361,14 @@ for chunk in RrdReader(RRD).stream():
         e["points"] += pa.compute.sum(pos.value_lengths()).as_py() or 0
     if col is not None:
         e["colored"] += pa.compute.sum(col.value_lengths()).as_py() or 0
+    if chunk.entity_path in first_png:
+        blob, media = comps.get("EncodedImage:blob"), comps.get("EncodedImage:media_type")
+        times = comps["message_log_time"].cast(pa.int64()).to_pylist() if "message_log_time" in comps else []
+        for i, t in enumerate(times):
+            if media is not None and media[i].is_valid and media[i].values.to_pylist() != ["image/png"]:
+                fail(f"rerun: {chunk.entity_path} @ {t}: media type {media[i].values.to_pylist()}, expected image/png")
+            if blob is not None and blob[i].is_valid and t == first_png[chunk.entity_path][0]:
+                e["first_blob"] = blob[i].values[0].values.to_numpy(zero_copy_only=False).tobytes()
     if chunk.entity_path == POINTS:
         if points_schema is None and pos is not None:
             points_schema = [f"{f.name}: {f.type}" for f in rb.schema]
@@ -362,6 +408,18 @@ if not np.array_equal(c, rgba0):
 say(f"rerun {POINTS}: {e['rows']['Points3D:positions']} rows, {e['points']} points, {e['colored']} colours; "
     f"first cloud's positions and RGBA colours identical to the MCAP")
 
+for topic in IMAGES:
+    e = entities.get(topic)
+    if e is None or e["rows"]["EncodedImage:blob"] != by_topic[topic]:
+        fail(f"rerun: {topic}: {0 if e is None else e['rows']['EncodedImage:blob']} rows of EncodedImage:blob, "
+             f"MCAP has {by_topic[topic]} messages")
+    if e["rows"]["EncodedImage:media_type"] != by_topic[topic]:
+        fail(f"rerun: {topic}: {e['rows']['EncodedImage:media_type']} rows of EncodedImage:media_type, "
+             f"MCAP has {by_topic[topic]} messages")
+    if e.get("first_blob") != first_png[topic][1]:
+        fail(f"rerun: {topic} @ {first_png[topic][0]}: the EncodedImage blob differs from the MCAP's PNG")
+    say(f"rerun {topic}: {by_topic[topic]} rows of EncodedImage (image/png); first blob identical to the MCAP's PNG")
+
 # ---- table ---------------------------------------------------------------------
 print()
 print(f"{'topic':<28} {'messages':>8}  {'rerun entity':<28} {'archetypes':<50} {'rows':>5} {'points':>9} colours")
@@ -379,7 +437,7 @@ for topic in NEED_MESSAGES + NEED_CHANNEL:
     print(f"{topic:<28} {by_topic[topic]:>8}  {topic:<28} {arch:<50} {rows:>5} {pts:>9} {colours}")
 print()
 print(f"check-viewers: OK: {MCAP} reads in mcap {importlib.metadata.version('mcap')} (CRCs validated) "
-      f"and Rerun {rr.__version__} (Points3D with colours)")
+      f"and Rerun {rr.__version__} (Points3D with colours, PNG range images)")
 PY
 
 hint=""

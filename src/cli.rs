@@ -781,6 +781,13 @@ fn summary_text(s: &RunSummary) -> String {
         a.threat_points_written,
         a.engine_s
     );
+    if a.images_not_encoded > 0 {
+        let _ = writeln!(
+            out,
+            "  warning       {} range images could not be encoded as PNG and were left out",
+            a.images_not_encoded
+        );
+    }
     let _ = writeln!(out, "  near misses   {}", s.events.len());
     for event in s.events.iter().take(5) {
         let _ = writeln!(

@@ -278,14 +278,22 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
         ("/looming/image/disagreement", 1),
     ] {
         for message in contents.topic_messages(topic) {
-            let (_, result) = &engine[&message.log_time];
+            let (pair, result) = &engine[&message.log_time];
             let image = decode(&contents, message);
             let (rows, cols) = (result.geometry.rows, result.geometry.cols);
-            assert_eq!(field(&image, "width").as_u32(), Some(cols as u32));
-            assert_eq!(field(&image, "height").as_u32(), Some(rows as u32));
-            assert_eq!(field(&image, "encoding").as_str(), Some("rgb8"));
-            assert_eq!(field(&image, "step").as_u32(), Some(cols as u32 * 3));
-            let data = field(&image, "data").as_bytes().unwrap().to_vec();
+            assert_eq!(field(&image, "format").as_str(), Some("png"));
+            assert_eq!(stamp_ns(&image), pair.current.stamp_ns);
+            assert_eq!(
+                field(&image, "frame_id").as_str(),
+                Some(&*pair.current.frame_id)
+            );
+            let png = field(&image, "data").as_bytes().unwrap().to_vec();
+            let decoded = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
+                .expect("a PNG")
+                .to_rgb8();
+            assert_eq!(decoded.width(), cols as u32);
+            assert_eq!(decoded.height(), rows as u32);
+            let data = decoded.into_raw();
             assert_eq!(data.len(), rows * cols * 3);
             let values = if values == 0 {
                 &result.fused

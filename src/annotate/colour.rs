@@ -21,25 +21,104 @@ pub const EMPTY: Rgba = [0, 0, 0, 255];
 
 /// Intensity steps of the scale: the eye tells no more apart, and a few
 /// distinct colours compress several times better than 256.
-pub const LEVELS: f32 = 16.0;
+pub const STEPS: u8 = 16;
+/// [`STEPS`] as a float, for the scale's arithmetic.
+pub const LEVELS: f32 = STEPS as f32;
 
 /// The looming scale: the square root of `|L| / 1 1/s` (clamped to 1, in
 /// [`LEVELS`] steps) blends [`ZERO`] into red (L > 0) or blue (L < 0); the
 /// square root spreads the small values that make up most of a scene. NaN is
 /// [`MASKED`].
 pub fn looming(looming_per_s: f32) -> Rgba {
+    match looming_step(looming_per_s) {
+        None => MASKED,
+        Some(step) => step_colour(step),
+    }
+}
+
+/// One colour of the looming scale: the sign of the value and its intensity
+/// step, 0 (zero looming, [`ZERO`] whatever the sign) to [`STEPS`] (full).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Step {
+    approaching: bool,
+    level: u8,
+}
+
+/// The step of a value on the looming scale; `None` for NaN or infinity.
+fn looming_step(looming_per_s: f32) -> Option<Step> {
     if !looming_per_s.is_finite() {
-        return MASKED;
+        return None;
     }
     let s = (looming_per_s.abs() / SATURATION_PER_S).min(1.0).sqrt();
-    let s = (s * LEVELS).round() / LEVELS;
-    let target: [f32; 3] = if looming_per_s >= 0.0 {
+    Some(Step {
+        approaching: looming_per_s >= 0.0,
+        level: (s * LEVELS).round() as u8,
+    })
+}
+
+fn step_colour(step: Step) -> Rgba {
+    // level / LEVELS is exact in f32: the blend is the one of the scale's
+    // definition, rounded intensity included.
+    let s = f32::from(step.level) / LEVELS;
+    let target: [f32; 3] = if step.approaching {
         [255.0, 0.0, 0.0]
     } else {
         [30.0, 90.0, 255.0]
     };
     let blend = |k: usize| (f32::from(ZERO[k]) * (1.0 - s) + target[k] * s).round() as u8;
     [blend(0), blend(1), blend(2), 255]
+}
+
+/// Palette index of [`EMPTY`] in range images.
+pub const EMPTY_INDEX: u8 = 0;
+/// Palette index of [`MASKED`] in range images.
+pub const MASKED_INDEX: u8 = 1;
+/// Palette index of [`ZERO`]; then each step, approaching and receding in
+/// turn: `ZERO_INDEX + 2 level - 1` and `ZERO_INDEX + 2 level`.
+const ZERO_INDEX: u8 = 2;
+/// Colours a range image can hold: empty, masked, zero and the scale's
+/// steps each way.
+pub const PALETTE_LEN: usize = 3 + 2 * STEPS as usize;
+
+/// The palette index of a value in range images (see [`image_palette`]):
+/// one byte per cell instead of three, which is what makes their PNGs small.
+/// Weak values of either sign get neighbouring indexes, so the noise of the
+/// static world (small values of both signs side by side) differs little
+/// from cell to cell: a fifth fewer bytes than with the signs apart.
+pub fn looming_index(looming_per_s: f32) -> u8 {
+    match looming_step(looming_per_s) {
+        None => MASKED_INDEX,
+        Some(Step { level: 0, .. }) => ZERO_INDEX,
+        Some(Step {
+            approaching: true,
+            level,
+        }) => ZERO_INDEX + 2 * level - 1,
+        Some(Step {
+            approaching: false,
+            level,
+        }) => ZERO_INDEX + 2 * level,
+    }
+}
+
+/// The RGB colours of the range-image palette, by index: [`EMPTY`],
+/// [`MASKED`], [`ZERO`], then steps 1 to [`STEPS`], each approaching then
+/// receding. `image_palette()[looming_index(L)]` is `looming(L)` without
+/// alpha.
+pub fn image_palette() -> [[u8; 3]; PALETTE_LEN] {
+    let mut palette = [[0; 3]; PALETTE_LEN];
+    let rgb = |c: Rgba| [c[0], c[1], c[2]];
+    palette[usize::from(EMPTY_INDEX)] = rgb(EMPTY);
+    palette[usize::from(MASKED_INDEX)] = rgb(MASKED);
+    palette[usize::from(ZERO_INDEX)] = rgb(ZERO);
+    for level in 1..=STEPS {
+        for (approaching, index) in [
+            (true, ZERO_INDEX + 2 * level - 1),
+            (false, ZERO_INDEX + 2 * level),
+        ] {
+            palette[usize::from(index)] = rgb(step_colour(Step { approaching, level }));
+        }
+    }
+    palette
 }
 
 /// Yellow, orange, red for low, medium, high; [`ZERO`] for none.
@@ -85,6 +164,31 @@ mod tests {
         assert_eq!(looming(0.2500), looming(0.2501));
         let (weak, strong) = (looming(0.1), looming(0.5));
         assert!(weak[0] < strong[0] && weak[1] > strong[1]);
+    }
+
+    #[test]
+    fn the_palette_holds_every_colour_of_the_scale() {
+        let palette = image_palette();
+        let rgb = |c: Rgba| [c[0], c[1], c[2]];
+        assert_eq!(palette[usize::from(EMPTY_INDEX)], rgb(EMPTY));
+        assert_eq!(palette[usize::from(looming_index(f32::NAN))], rgb(MASKED));
+        assert_eq!(
+            palette[usize::from(looming_index(f32::INFINITY))],
+            rgb(MASKED)
+        );
+        // Every value in 1e-4 steps over and beyond the scale, and zero of
+        // either sign.
+        let values = (-25_000..=25_000)
+            .map(|i| i as f32 * 1e-4)
+            .chain([-0.0, 1e-9, -1e-9, 3.0, -7.5]);
+        let mut used = [false; PALETTE_LEN];
+        for value in values {
+            let index = usize::from(looming_index(value));
+            assert_eq!(palette[index], rgb(looming(value)), "{value}");
+            used[index] = true;
+        }
+        // Every index but empty and masked is a value's colour.
+        assert!(used[2..].iter().all(|&u| u));
     }
 
     #[test]

@@ -75,14 +75,16 @@ fn protobuf_spec<T: Encode>(topic: &str) -> OwnChannelSpec {
 
 impl Channel {
     fn spec(self) -> OwnChannelSpec {
-        use ::foxglove::messages::{Log, PointCloud, RawImage, SceneUpdate};
+        use ::foxglove::messages::{CompressedImage, Log, PointCloud, SceneUpdate};
         match self {
             Channel::Points => protobuf_spec::<PointCloud>(POINTS_TOPIC),
             Channel::Disagreement => protobuf_spec::<PointCloud>(DISAGREEMENT_TOPIC),
             Channel::Threat => protobuf_spec::<PointCloud>(THREAT_TOPIC),
             Channel::ThreatZones => protobuf_spec::<SceneUpdate>(THREAT_ZONES_TOPIC),
-            Channel::ImageFused => protobuf_spec::<RawImage>(IMAGE_FUSED_TOPIC),
-            Channel::ImageDisagreement => protobuf_spec::<RawImage>(IMAGE_DISAGREEMENT_TOPIC),
+            Channel::ImageFused => protobuf_spec::<CompressedImage>(IMAGE_FUSED_TOPIC),
+            Channel::ImageDisagreement => {
+                protobuf_spec::<CompressedImage>(IMAGE_DISAGREEMENT_TOPIC)
+            }
             Channel::Events => {
                 OwnChannelSpec::json(EVENTS_TOPIC, "looming.NearMissEvent", EVENT_SCHEMA)
             }
@@ -122,6 +124,9 @@ pub struct AnnotateStats {
     pub disagreement_points_written: u64,
     pub threat_points_written: u64,
     pub events: u64,
+    /// Range images the PNG encoder refused (dimensions no PNG can hold):
+    /// left out of their channel.
+    pub images_not_encoded: u64,
     /// Time spent in the engine, seconds.
     pub engine_s: f64,
     /// Smallest event cluster used, cells.
@@ -228,8 +233,6 @@ impl Annotator {
         self.stats.disagreement_points_written += point_count(&disagreement);
         self.stats.threat_points_written += point_count(&threat);
         let zones = foxglove::threat_zones(scan, looming, &self.config.engine.threat_ttc_s);
-        let fused_image = foxglove::range_image(scan, looming, &looming.fused);
-        let d_image = foxglove::range_image(scan, looming, &looming.disagreement);
         self.push(Channel::Points, log_time_ns, points.encode_to_vec(), out);
         self.push(
             Channel::Disagreement,
@@ -244,18 +247,17 @@ impl Annotator {
             zones.encode_to_vec(),
             out,
         );
-        self.push(
-            Channel::ImageFused,
-            log_time_ns,
-            fused_image.encode_to_vec(),
-            out,
-        );
-        self.push(
-            Channel::ImageDisagreement,
-            log_time_ns,
-            d_image.encode_to_vec(),
-            out,
-        );
+        for (channel, values) in [
+            (Channel::ImageFused, &looming.fused),
+            (Channel::ImageDisagreement, &looming.disagreement),
+        ] {
+            match foxglove::range_image(scan, looming, values) {
+                Ok(image) => self.push(channel, log_time_ns, image.encode_to_vec(), out),
+                // Only dimensions no PNG holds fail: the pair's other
+                // channels are still worth writing, so count and go on.
+                Err(_) => self.stats.images_not_encoded += 1,
+            }
+        }
     }
 
     /// An event goes out at the log time of its first hot scan, on both the
