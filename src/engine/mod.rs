@@ -554,8 +554,8 @@ fn column_times(
             if times.is_empty() {
                 return StampNs::MIN;
             }
-            times.sort_unstable();
-            times[times.len() / 2]
+            let mid = times.len() / 2;
+            *times.select_nth_unstable(mid).1
         })
         .collect()
 }
@@ -835,9 +835,13 @@ fn median_3x3(values: impl Iterator<Item = f32>) -> Option<f32> {
         window[count] = value;
         count += 1;
     }
-    let window = &mut window[..count];
-    window.sort_unstable_by(f32::total_cmp);
-    window.get(count / 2).copied()
+    if count == 0 {
+        return None;
+    }
+    // The middle order statistic by selection (its value is the sorted
+    // middle's, whatever the order of equals).
+    let (_, middle, _) = window[..count].select_nth_unstable_by(count / 2, f32::total_cmp);
+    Some(*middle)
 }
 
 /// The best estimate per cell: on the static world the ego prediction (exact
