@@ -83,12 +83,16 @@ pub fn render(
                 .collect()
         })
         .collect();
+    // Into row-major order, a row per task.
     let mut vertices: Vec<Option<Vertex>> = vec![None; cells];
-    for (col, column) in columns.into_iter().enumerate() {
-        for (row, vertex) in column.into_iter().enumerate() {
-            vertices[row * geometry.cols + col] = vertex;
-        }
-    }
+    vertices
+        .par_chunks_mut(geometry.cols)
+        .enumerate()
+        .for_each(|(row, cells_of_row)| {
+            for (vertex, column) in cells_of_row.iter_mut().zip(&columns) {
+                *vertex = column[row];
+            }
+        });
     let proxy = fill_dropouts(source, geometry, &mut vertices);
     let candidates: Vec<Vec<Candidate>> = if geometry.sparse_rows() {
         (0..geometry.rows)
