@@ -46,6 +46,16 @@ fn synth_drive_of(dir: &Path, duration_s: &str) -> PathBuf {
 /// `synth` rewritten in `compression`, small chunks, with two attachments and
 /// one more metadata record.
 fn chunked_input(synth: &Path, compression: Option<mcap::Compression>, out: &Path) -> Vec<u8> {
+    chunked_input_with(synth, compression, out, &mut |_| {})
+}
+
+/// [`chunked_input`], each message through `edit` first.
+fn chunked_input_with(
+    synth: &Path,
+    compression: Option<mcap::Compression>,
+    out: &Path,
+    edit: &mut dyn FnMut(&mut mcap::Message<'_>),
+) -> Vec<u8> {
     let bytes = std::fs::read(synth).unwrap();
     let mut writer = mcap::WriteOptions::new()
         .profile("ros2")
@@ -55,7 +65,9 @@ fn chunked_input(synth: &Path, compression: Option<mcap::Compression>, out: &Pat
         .create(std::io::BufWriter::new(std::fs::File::create(out).unwrap()))
         .unwrap();
     for message in mcap::MessageStream::new(&bytes).unwrap() {
-        writer.write(&message.unwrap()).unwrap();
+        let mut message = message.unwrap();
+        edit(&mut message);
+        writer.write(&message).unwrap();
     }
     for metadata in read_all(&bytes).metadata {
         writer.write_metadata(&metadata).unwrap();
@@ -542,4 +554,33 @@ fn a_chunk_failing_its_crc_is_written_anew_or_fails_a_strict_run() {
         assert_eq!(run.status.code(), Some(3), "{topic}: {}", stderr(&run));
         assert!(!strict.exists(), "no output on failure");
     }
+}
+
+#[test]
+fn bad_messages_in_copied_chunks_are_skipped_counted_and_kept() {
+    let dir = scratch("passthrough-bad-message");
+    let synth = synth_drive(&dir);
+    let in_path = dir.join("in.mcap");
+    let mut imu_seen = 0;
+    let input = chunked_input_with(&synth, Some(mcap::Compression::Zstd), &in_path, &mut |m| {
+        if m.channel.topic == "/imu/data" {
+            imu_seen += 1;
+            if imu_seen == 5 {
+                m.data = std::borrow::Cow::Owned(m.data[..10].to_vec());
+            }
+        }
+    });
+    let out_path = dir.join("out.mcap");
+    let summary = process_ok(&in_path, &out_path, &[]);
+    assert_eq!(summary["write"]["mode"], "pass_through");
+    assert_eq!(summary["bad_messages"], 1);
+    assert_eq!(summary["bad_messages_by_topic"]["/imu/data"], 1);
+    let output = read_all(&std::fs::read(&out_path).unwrap());
+    assert_all_input_messages_copied(&read_all(&input), &output);
+
+    let strict = dir.join("strict.mcap");
+    let run = looming_process(&in_path, &strict, &["--strict"]);
+    assert_eq!(run.status.code(), Some(3), "{}", stderr(&run));
+    assert!(stderr(&run).contains("/imu/data"), "{}", stderr(&run));
+    assert!(!strict.exists(), "no output on failure");
 }
