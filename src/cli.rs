@@ -13,7 +13,7 @@ use looming::engine::EngineConfig;
 use looming::events::EventConfig;
 use looming::input::{InputOptions, ReadMode};
 use looming::kitti::SweepDirection;
-use looming::output::{OutputCompression, OutputOptions};
+use looming::output::{OutputCompression, OutputOptions, WriteMode};
 use looming::pipeline::{PairingSettings, ProcessConfig, ProcessError, ProgressSink, RunSummary};
 use looming::render::{RenderAt, RenderChannel, RenderOptions, RenderView};
 use looming::topics::TopicOverrides;
@@ -218,8 +218,9 @@ struct ProcessArgs {
     /// of skipping and counting it.
     #[arg(long)]
     strict: bool,
-    /// Check every chunk's CRC before using its messages (the indexed reader
-    /// does not; costs a second decompression).
+    /// Check every chunk's CRC before using its messages (otherwise only the
+    /// chunks a pass-through run decompresses are checked; costs a
+    /// decompression of every chunk).
     #[arg(long)]
     verify: bool,
     /// LiDAR topic (sensor_msgs/PointCloud2 or foxglove.PointCloud); auto-detected
@@ -695,6 +696,17 @@ impl ProgressSink for Progress {
 }
 
 /// The one-screen summary.
+/// How the output was written, for the summary.
+fn write_line(s: &RunSummary) -> String {
+    match &s.write {
+        WriteMode::PassThrough => format!(
+            "pass-through: {} input chunks copied as they are ({} decompressed to read the selected topics)",
+            s.input_report.chunks_copied, s.input_report.chunks_decompressed
+        ),
+        WriteMode::Rewrite { reason } => format!("every message written anew ({reason})"),
+    }
+}
+
 fn summary_text(s: &RunSummary) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
@@ -709,6 +721,7 @@ fn summary_text(s: &RunSummary) -> String {
         s.tool_version, s.input, s.output
     );
     let _ = writeln!(out, "  read          {mode}");
+    let _ = writeln!(out, "  write         {}", write_line(s));
     let _ = writeln!(
         out,
         "  copied        {} messages, {} metadata, {} attachments",

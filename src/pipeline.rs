@@ -4,7 +4,7 @@
 //! makes the output deterministic: the same input and options give the same
 //! bytes.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::time::Instant;
@@ -12,11 +12,13 @@ use std::time::Instant;
 use crate::annotate::{AnnotateConfig, AnnotateStats, Annotator, OwnMessage, channel_specs};
 use crate::decode::{self, DecodeLimits};
 use crate::events::{EventsFile, NearMissEvent};
-use crate::input::Catalog;
+use crate::input::{Catalog, CopiedRecord, CopyEvent};
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
 use crate::messages::Decoded;
 use crate::output::pairs::{PairRecord, pairs_channel_spec};
-use crate::output::{OutputError, OutputOptions, OutputWriter, check_output_path};
+use crate::output::{
+    Copied, OutputError, OutputOptions, OutputWriter, WriteMode, check_output_path,
+};
 use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
 use crate::topics::{Role, SelectedChannel, TopicError, TopicOverrides, TopicSelection, select};
 
@@ -144,6 +146,8 @@ pub struct RunSummary {
     pub input: String,
     pub output: String,
     pub read: ReadMode,
+    /// Input chunks copied as they are, or every message written anew.
+    pub write: WriteMode,
     pub topics: TopicSelection,
     pub messages_copied: u64,
     pub metadata_copied: u64,
@@ -205,7 +209,15 @@ pub fn process(
                 path: config.input.clone(),
                 source,
             })?;
-        let outcome = run_once(config, &input, &topics, cli_extrinsic, progress)?;
+        let write_mode = choose_write_mode(config, &input);
+        let outcome = run_once(
+            config,
+            &input,
+            &topics,
+            &write_mode,
+            cli_extrinsic,
+            progress,
+        )?;
         // IndexedReader silently skips messages outside chunks: if the count
         // disagrees with the statistics, read the file linearly instead.
         let expected = input.expected_messages();
@@ -224,8 +236,27 @@ pub fn process(
             input.force_linear(reason)?;
             continue;
         }
-        return finish_run(config, &input, topics, outcome, started, restarted_because);
+        let run = Run {
+            topics,
+            write_mode,
+            started,
+            restarted_because,
+        };
+        return finish_run(config, &input, run, outcome);
     }
+}
+
+/// Copy the input's chunks as they are when the input allows it; else write
+/// every message anew (the reason goes into the summary).
+fn choose_write_mode(config: &ProcessConfig, input: &InputFile) -> WriteMode {
+    let reason = if config.replace {
+        "--replace drops channels whose messages share the input's chunks".to_string()
+    } else if let Some(blocker) = input.copy_blocker() {
+        blocker.to_string()
+    } else {
+        return WriteMode::PassThrough;
+    };
+    WriteMode::Rewrite { reason }
 }
 
 fn is_ours(topic: &str) -> bool {
@@ -287,13 +318,19 @@ struct WriterCounts {
 #[allow(clippy::large_enum_variant)]
 enum FromReader {
     Record(InputRecord),
-    Decoded { log_time_ns: u64, decoded: Decoded },
+    /// An input record to copy as it is (pass-through).
+    Copy(CopiedRecord),
+    Decoded {
+        log_time_ns: u64,
+        decoded: Decoded,
+    },
     Bad(BadMessage),
 }
 
 /// Items for the writer.
 enum ToWriter {
     Input(InputRecord),
+    Copy(CopiedRecord),
     Own(OwnMessage),
 }
 
@@ -301,6 +338,7 @@ fn run_once(
     config: &ProcessConfig,
     input: &InputFile,
     topics: &TopicSelection,
+    write_mode: &WriteMode,
     cli_extrinsic: Option<nalgebra::Isometry3<f64>>,
     progress: &dyn ProgressSink,
 ) -> Result<PassOutcome, ProcessError> {
@@ -316,7 +354,14 @@ fn run_once(
         .filter(|id| !catalog.channels.contains_key(id))
         .copied()
         .collect();
-    let mut writer = OutputWriter::create(&config.output, &config.output_options, &catalog)?;
+    let mut writer = match write_mode {
+        WriteMode::PassThrough => {
+            OutputWriter::create_pass_through(&config.output, &config.output_options, &catalog)?
+        }
+        WriteMode::Rewrite { .. } => {
+            OutputWriter::create(&config.output, &config.output_options, &catalog)?
+        }
+    };
     let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
     let annotate_channels = channel_specs()
         .iter()
@@ -335,7 +380,7 @@ fn run_once(
     let (reader_tx, reader_rx) = sync_channel::<FromReader>(STAGE_QUEUE_LEN);
     let (writer_tx, writer_rx) = sync_channel::<ToWriter>(STAGE_QUEUE_LEN);
     std::thread::scope(|scope| {
-        let reader = scope.spawn(|| read_and_decode(config, input, topics, reader_tx));
+        let reader = scope.spawn(|| read_and_decode(config, input, topics, write_mode, reader_tx));
         let pairing = scope.spawn(move || {
             let mut pairer = ScanPairer::new(pairing_config);
             pairer.set_nominal_period_s(nominal_period_s);
@@ -371,55 +416,32 @@ fn read_and_decode(
     config: &ProcessConfig,
     input: &InputFile,
     topics: &TopicSelection,
+    write_mode: &WriteMode,
     tx: SyncSender<FromReader>,
 ) -> Result<ReadReport, ProcessError> {
-    let by_channel: HashMap<u16, &SelectedChannel> =
-        topics.all().map(|c| (c.channel_id, c)).collect();
     let file_name = input.path().display().to_string();
-    let mut strict_failure: Option<BadMessage> = None;
-    let mut sink = |record: InputRecord| -> Flow {
-        let decoded = match &record {
-            InputRecord::Message(message) => by_channel.get(&message.channel_id).map(|channel| {
-                let is_static = channel.role == Role::TfStatic;
-                decode::decode(
-                    channel.kind,
-                    channel.encoding,
-                    is_static,
-                    &message.data,
-                    &config.decode_limits,
-                )
-                .map(|decoded| (message.log_time_ns, decoded))
-                .map_err(|err| BadMessage {
-                    file: file_name.clone(),
-                    topic: channel.topic.clone(),
-                    log_time_ns: message.log_time_ns,
-                    reason: err.to_string(),
-                })
-            }),
-            _ => None,
-        };
-        if tx.send(FromReader::Record(record)).is_err() {
-            return Flow::Break(());
-        }
-        let item = match decoded {
-            None => return Flow::Continue(()),
-            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded {
-                log_time_ns,
-                decoded,
-            },
-            Some(Err(bad)) if config.strict => {
-                strict_failure = Some(bad);
-                return Flow::Break(());
-            }
-            Some(Err(bad)) => FromReader::Bad(bad),
-        };
-        if tx.send(item).is_err() {
-            return Flow::Break(());
-        }
-        Flow::Continue(())
+    let mut stage = ReadStage {
+        decoder: Decoder {
+            config,
+            by_channel: topics.all().map(|c| (c.channel_id, c)).collect(),
+            file_name: file_name.clone(),
+        },
+        tx,
+        strict: config.strict,
+        strict_failure: None,
     };
-    let result = input.read_records(config.strict, &mut sink);
-    if let Some(bad) = strict_failure {
+    let result = match write_mode {
+        WriteMode::PassThrough => {
+            let selected: BTreeSet<u16> = topics.all().map(|c| c.channel_id).collect();
+            input.read_copying(config.strict, &selected, &mut |event| {
+                stage.copy_event(event)
+            })
+        }
+        WriteMode::Rewrite { .. } => {
+            input.read_records(config.strict, &mut |record| stage.record(record))
+        }
+    };
+    if let Some(bad) = stage.strict_failure {
         return Err(ProcessError::Strict(bad.to_string()));
     }
     let report = result.map_err(|error| match error {
@@ -432,6 +454,110 @@ fn read_and_decode(
         return Err(ProcessError::Strict(format!("{file_name}: {reason}")));
     }
     Ok(report)
+}
+
+/// A decoded message: its log time and what it holds.
+type DecodeResult = Result<(u64, Decoded), BadMessage>;
+
+/// Decodes the messages of the selected topics.
+struct Decoder<'a> {
+    config: &'a ProcessConfig,
+    by_channel: HashMap<u16, &'a SelectedChannel>,
+    file_name: String,
+}
+
+impl Decoder<'_> {
+    /// The message decoded, when its channel is selected.
+    fn decode(&self, channel_id: u16, log_time_ns: u64, data: &[u8]) -> Option<DecodeResult> {
+        let channel = self.by_channel.get(&channel_id)?;
+        let is_static = channel.role == Role::TfStatic;
+        let decoded = decode::decode(
+            channel.kind,
+            channel.encoding,
+            is_static,
+            data,
+            &self.config.decode_limits,
+        );
+        Some(
+            decoded
+                .map(|decoded| (log_time_ns, decoded))
+                .map_err(|err| BadMessage {
+                    file: self.file_name.clone(),
+                    topic: channel.topic.clone(),
+                    log_time_ns,
+                    reason: err.to_string(),
+                }),
+        )
+    }
+}
+
+/// The reader's side of stage 1: records and decoded messages onto the
+/// channel to the pairing stage.
+struct ReadStage<'a> {
+    decoder: Decoder<'a>,
+    tx: SyncSender<FromReader>,
+    strict: bool,
+    /// The bad message that stopped a strict run.
+    strict_failure: Option<BadMessage>,
+}
+
+impl ReadStage<'_> {
+    fn send(&self, item: FromReader) -> Flow {
+        match self.tx.send(item) {
+            Ok(()) => Flow::Continue(()),
+            Err(_) => Flow::Break(()),
+        }
+    }
+
+    /// A record to write anew; its message decoded too, when selected.
+    fn record(&mut self, record: InputRecord) -> Flow {
+        let decoded = match &record {
+            InputRecord::Message(message) => {
+                self.decoder
+                    .decode(message.channel_id, message.log_time_ns, &message.data)
+            }
+            _ => None,
+        };
+        if self.send(FromReader::Record(record)).is_break() {
+            return Flow::Break(());
+        }
+        self.deliver(decoded)
+    }
+
+    /// What a copying read hands over: records to copy, messages to decode,
+    /// messages to write anew.
+    fn copy_event(&mut self, event: CopyEvent<'_>) -> Flow {
+        match event {
+            CopyEvent::Copy(record) => self.send(FromReader::Copy(record)),
+            CopyEvent::Selected(message) => {
+                let header = message.header;
+                let decoded = self
+                    .decoder
+                    .decode(header.channel_id, header.log_time, message.data);
+                self.deliver(decoded)
+            }
+            CopyEvent::Salvaged(message) => {
+                self.record(InputRecord::Message(message.to_owned_message()))
+            }
+        }
+    }
+
+    /// Send a decoded message (or its failure) on.
+    fn deliver(&mut self, decoded: Option<DecodeResult>) -> Flow {
+        let item = match decoded {
+            None => return Flow::Continue(()),
+            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded {
+                log_time_ns,
+                decoded,
+            },
+            Some(Err(bad)) if self.strict => {
+                self.strict_failure = Some(bad);
+                return Flow::Break(());
+            }
+            Some(Err(bad)) => FromReader::Bad(bad),
+        };
+        self.send(item)
+    }
 }
 
 /// What the pairing stage saw.
@@ -462,6 +588,12 @@ fn pair_scans(
         let events = match item {
             FromReader::Record(record) => {
                 if tx.send(ToWriter::Input(record)).is_err() {
+                    break;
+                }
+                continue;
+            }
+            FromReader::Copy(record) => {
+                if tx.send(ToWriter::Copy(record)).is_err() {
                     break;
                 }
                 continue;
@@ -591,6 +723,14 @@ fn write_all(
                 writer.write_attachment(&attachment)?;
                 counts.attachments += 1;
             }
+            ToWriter::Copy(record) => match writer.copy(&record)? {
+                Copied::Messages(messages) => {
+                    counts.messages += messages;
+                    progress.update(counts.messages, total);
+                }
+                Copied::Metadata => counts.metadata += 1,
+                Copied::Attachment => counts.attachments += 1,
+            },
             ToWriter::Own(OwnMessage {
                 channel_id,
                 sequence,
@@ -606,14 +746,26 @@ fn write_all(
     Ok(counts)
 }
 
+/// What a finished pass was run with.
+struct Run {
+    topics: TopicSelection,
+    write_mode: WriteMode,
+    started: Instant,
+    restarted_because: Option<String>,
+}
+
 fn finish_run(
     config: &ProcessConfig,
     input: &InputFile,
-    topics: TopicSelection,
+    run: Run,
     outcome: PassOutcome,
-    started: Instant,
-    restarted_because: Option<String>,
 ) -> Result<RunSummary, ProcessError> {
+    let Run {
+        topics,
+        write_mode,
+        started,
+        restarted_because,
+    } = run;
     let PassOutcome {
         mut writer,
         report,
@@ -621,7 +773,7 @@ fn finish_run(
         pairing,
     } = outcome;
     let stats = pairing.stats.clone().unwrap_or_default();
-    writer.write_metadata(&run_metadata(config, input, &topics, &stats))?;
+    writer.write_metadata(&run_metadata(config, input, &topics, &write_mode, &stats))?;
     let output_bytes = writer.finish()?;
     let mut warnings: Vec<String> = Vec::new();
     if let ReadMode::Linear { reason } = input.mode() {
@@ -644,6 +796,7 @@ fn finish_run(
         input: config.input.display().to_string(),
         output: config.output.display().to_string(),
         read: input.mode().clone(),
+        write: write_mode,
         topics,
         messages_copied: summary_counts.messages,
         metadata_copied: summary_counts.metadata,
@@ -674,6 +827,7 @@ fn run_metadata(
     config: &ProcessConfig,
     input: &InputFile,
     topics: &TopicSelection,
+    write_mode: &WriteMode,
     stats: &PairingStats,
 ) -> mcap::records::Metadata {
     let input_name = config
@@ -684,6 +838,7 @@ fn run_metadata(
     let resolved = serde_json::json!({
         "input_file": input_name,
         "read": input.mode(),
+        "write": write_mode,
         "topics": topics,
         "strict": config.strict,
         "verify_crc": config.input_options.verify_crc,

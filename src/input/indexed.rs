@@ -1,7 +1,6 @@
 //! Indexed reading: summary section, then messages in log-time order through
 //! `sans_io::IndexedReader`, one chunk read from disk per request.
 
-use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
@@ -11,6 +10,7 @@ use mcap::sans_io::indexed_reader::ReadOrder;
 use mcap::sans_io::{IndexedReadEvent, IndexedReader, IndexedReaderOptions, SummaryReadEvent};
 use mcap::sans_io::{SummaryReader, SummaryReaderOptions};
 
+use super::chunks::Unpacker;
 use super::{
     Flow, InputAttachment, InputError, InputMessage, InputOptions, InputRecord, InputWarning,
     ReadReport,
@@ -150,13 +150,13 @@ pub(super) fn read(
     Ok(report)
 }
 
-struct SideRecord {
-    offset: u64,
-    length: u64,
+pub(super) struct SideRecord {
+    pub offset: u64,
+    pub length: u64,
 }
 
 /// Metadata and attachment records in file order (deterministic).
-fn side_records(summary: &mcap::Summary) -> Vec<SideRecord> {
+pub(super) fn side_records(summary: &mcap::Summary) -> Vec<SideRecord> {
     let mut records: Vec<SideRecord> = summary
         .metadata_indexes
         .iter()
@@ -195,6 +195,7 @@ fn read_messages(
     let mut reader = IndexedReader::new_with_options(summary, reader_options)
         .map_err(|e| mcap_err("the chunk indexes are invalid", e))?;
     let mut chunk_buffer = Vec::new();
+    let mut unpacker = Unpacker::default();
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| mcap_err("reading messages through the index failed", e))? {
             IndexedReadEvent::ReadChunkRequest { offset, length } => {
@@ -202,8 +203,9 @@ fn read_messages(
                 if options.verify_crc
                     && let Some(index) = index
                 {
-                    verify_chunk(path, file, file_size, index, options, &mut chunk_buffer)
-                        .or_else(|err| {
+                    let buffers = (&mut chunk_buffer, &mut unpacker);
+                    verify_chunk(path, file, file_size, index, options, buffers).or_else(
+                        |err| {
                             if strict {
                                 return Err(err);
                             }
@@ -214,7 +216,8 @@ fn read_messages(
                                 ),
                             });
                             Ok(())
-                        })?;
+                        },
+                    )?;
                 }
                 read_span(
                     path,
@@ -250,7 +253,7 @@ fn chunk_index_at(summary: &mcap::Summary, data_offset: u64) -> Option<&ChunkInd
 
 /// Read `length` bytes at `offset` into `buffer`, refusing lengths the file
 /// cannot hold or above the record limit (untrusted sizes never drive allocation).
-fn read_span(
+pub(super) fn read_span(
     path: &Path,
     file: &mut File,
     offset: u64,
@@ -280,7 +283,7 @@ fn read_span(
 }
 
 /// Parse a record read whole (opcode, length, body).
-fn parse_whole_record<'a>(
+pub(super) fn parse_whole_record<'a>(
     path: &Path,
     bytes: &'a [u8],
     offset: u64,
@@ -316,7 +319,7 @@ fn verify_chunk(
     file_size: u64,
     index: &ChunkIndex,
     options: &InputOptions,
-    buffer: &mut Vec<u8>,
+    (buffer, unpacker): (&mut Vec<u8>, &mut Unpacker),
 ) -> Result<(), InputError> {
     let bad = |reason: String| InputError::BadChunk {
         path: path.to_path_buf(),
@@ -341,120 +344,38 @@ fn verify_chunk(
             "the chunk index does not point to a chunk record".into()
         ));
     };
-    if header.uncompressed_size > options.record_length_limit as u64 {
-        return Err(bad(format!(
-            "uncompressed size {} is above the record limit",
-            header.uncompressed_size
-        )));
-    }
-    let uncompressed = decompress(
-        &header.compression,
-        &data,
-        header.uncompressed_size as usize,
-    )
-    .map_err(|e| bad(format!("cannot decompress: {e}")))?;
-    if uncompressed.len() as u64 != header.uncompressed_size {
-        return Err(bad(format!(
-            "decompressed to {} bytes, header says {}",
-            uncompressed.len(),
-            header.uncompressed_size
-        )));
-    }
-    // A CRC of zero means the writer did not compute one.
-    if header.uncompressed_crc != 0 {
-        let crc = crc32fast::hash(&uncompressed);
-        if crc != header.uncompressed_crc {
-            return Err(bad(format!(
-                "expected CRC {:08x}, computed {crc:08x}",
-                header.uncompressed_crc
-            )));
-        }
-    }
-    Ok(())
+    unpacker
+        .unpack(&header, &data, options)
+        .map_err(|fault| bad(fault.reason().to_string()))
 }
 
-/// Decompress a chunk body. Output is capped at `expected_size` + 1 so a hostile
-/// stream cannot balloon memory.
-pub(super) fn decompress(
+/// Decompress a chunk body into `out` (appended). Output is capped at
+/// `expected_size` + 1 so a hostile stream cannot balloon memory.
+pub(super) fn decompress_into(
     compression: &str,
     data: &[u8],
     expected_size: usize,
-) -> Result<Vec<u8>, String> {
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
     let limit = expected_size as u64 + 1;
-    let mut out = Vec::with_capacity(expected_size.min(64 << 20));
+    out.reserve(expected_size.min(64 << 20));
     match compression {
         "" => out.extend_from_slice(data),
         "zstd" => {
             let decoder = zstd::stream::read::Decoder::new(data).map_err(|e| e.to_string())?;
             decoder
                 .take(limit)
-                .read_to_end(&mut out)
+                .read_to_end(out)
                 .map_err(|e| e.to_string())?;
         }
         "lz4" => {
             let decoder = lz4::Decoder::new(data).map_err(|e| e.to_string())?;
             decoder
                 .take(limit)
-                .read_to_end(&mut out)
+                .read_to_end(out)
                 .map_err(|e| e.to_string())?;
         }
         other => return Err(format!("unsupported compression `{other}`")),
     }
-    Ok(out)
-}
-
-/// Exact first and last log time of every channel, from the message index
-/// records that follow each chunk (one small read per chunk). Files without
-/// message indexes give an empty map; inspection then falls back to the file's span.
-pub(super) fn channel_time_spans(
-    path: &Path,
-    summary: &mcap::Summary,
-    options: &InputOptions,
-) -> BTreeMap<u16, (u64, u64)> {
-    let mut spans: BTreeMap<u16, (u64, u64)> = BTreeMap::new();
-    let Ok(mut file) = File::open(path) else {
-        return spans;
-    };
-    let file_size = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let mut buffer = Vec::new();
-    for chunk in &summary.chunk_indexes {
-        let Some(&start) = chunk.message_index_offsets.values().min() else {
-            continue;
-        };
-        if read_span(
-            path,
-            &mut file,
-            start,
-            chunk.message_index_length,
-            file_size,
-            options,
-            &mut buffer,
-        )
-        .is_err()
-        {
-            return BTreeMap::new();
-        }
-        let mut rest = buffer.as_slice();
-        while rest.len() >= 9 {
-            let opcode = rest[0];
-            let len = u64::from_le_bytes(rest[1..9].try_into().expect("8 bytes"));
-            let Some(body) = usize::try_from(len)
-                .ok()
-                .and_then(|len| rest.get(9..9 + len))
-            else {
-                break;
-            };
-            if let Ok(Record::MessageIndex(index)) = mcap::parse_record(opcode, body) {
-                for entry in &index.records {
-                    let span = spans
-                        .entry(index.channel_id)
-                        .or_insert((entry.log_time, entry.log_time));
-                    span.0 = span.0.min(entry.log_time);
-                    span.1 = span.1.max(entry.log_time);
-                }
-            }
-            rest = &rest[9 + body.len()..];
-        }
-    }
-    spans
+    Ok(())
 }

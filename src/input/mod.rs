@@ -13,12 +13,19 @@
 //! Either way memory is bounded by the largest chunk or record, never by the
 //! length of the log. The reader yields [`InputRecord`]s through a callback; it
 //! decodes nothing itself.
+//!
+//! An indexed file whose messages are all indexed and already in log-time
+//! order in the file can also be read for a pass-through output
+//! ([`InputFile::read_copying`]): each chunk record whole, as stored, with its
+//! message index records ([`chunks`]).
 
 mod catalog;
+mod chunks;
 mod indexed;
 mod linear;
 mod reorder;
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -53,6 +60,73 @@ impl InputMessage {
             data: data.to_vec(),
         }
     }
+}
+
+/// A message inside a chunk being read, borrowed from its decompressed records.
+#[derive(Debug, Clone, Copy)]
+pub struct MessageRef<'a> {
+    pub header: mcap::records::MessageHeader,
+    pub data: &'a [u8],
+}
+
+impl MessageRef<'_> {
+    /// An owned copy.
+    pub fn to_owned_message(&self) -> InputMessage {
+        InputMessage::new(&self.header, self.data)
+    }
+}
+
+/// A record of the input copied into a pass-through output byte for byte.
+#[derive(Debug)]
+pub enum CopiedRecord {
+    Chunk(RawChunk),
+    /// A metadata or attachment record.
+    Side(RawRecord),
+}
+
+/// One chunk as stored in the input, with its message index records.
+#[derive(Debug)]
+pub struct RawChunk {
+    /// The input's index of the chunk (input offsets).
+    pub index: mcap::records::ChunkIndex,
+    /// The chunk record: opcode, length, header, compressed records.
+    pub record: Vec<u8>,
+    /// The message index records after it, as stored.
+    pub message_indexes: Vec<u8>,
+    /// Where `message_indexes` starts in the input.
+    pub message_indexes_offset: u64,
+    /// Messages per channel in the chunk, from its message indexes.
+    pub message_counts: BTreeMap<u16, u64>,
+}
+
+/// One whole record as stored: opcode, length, body.
+#[derive(Debug)]
+pub struct RawRecord {
+    pub bytes: Vec<u8>,
+}
+
+impl RawRecord {
+    pub fn opcode(&self) -> Option<u8> {
+        self.bytes.first().copied()
+    }
+
+    /// The body, after the opcode and the 8-byte length.
+    pub fn body(&self) -> &[u8] {
+        self.bytes.get(9..).unwrap_or_default()
+    }
+}
+
+/// What a copying read ([`InputFile::read_copying`]) hands downstream.
+#[derive(Debug)]
+pub enum CopyEvent<'a> {
+    /// To copy into the output as it is.
+    Copy(CopiedRecord),
+    /// A message on a selected channel inside the chunk just copied: to
+    /// decode only (it is in the output already).
+    Selected(MessageRef<'a>),
+    /// A message of a chunk whose records failed their CRC (that chunk is
+    /// not copied): to write anew, and to decode if its channel is selected.
+    Salvaged(MessageRef<'a>),
 }
 
 /// One attachment, owned.
@@ -154,9 +228,15 @@ pub struct ReadReport {
     /// Linear mode: messages that arrived later than the reorder window allows;
     /// they are still copied, in arrival order.
     pub out_of_order_beyond_window: u64,
-    /// Chunks whose CRC did not match (`--verify`); their messages were still
-    /// copied unchanged (never dropped) unless the run is strict.
+    /// Chunks whose CRC did not match (`--verify`, and in a pass-through read
+    /// every chunk decompressed); their messages were still copied unchanged
+    /// (never dropped) unless the run is strict.
     pub bad_crc_chunks: u64,
+    /// Pass-through read: chunks handed over whole, to copy as they are.
+    pub chunks_copied: u64,
+    /// Pass-through read: chunks decompressed (to decode their selected
+    /// messages, or to check their CRC).
+    pub chunks_decompressed: u64,
     /// Where the file ended early or was damaged, if it did.
     pub truncated: Option<String>,
     pub warnings: Vec<InputWarning>,
@@ -172,6 +252,8 @@ pub struct InputFile {
     catalog: Arc<Catalog>,
     mode: ReadMode,
     summary: Option<mcap::Summary>,
+    /// `Err(reason)` when the chunks cannot be copied byte for byte.
+    copyable: Result<(), String>,
 }
 
 impl InputFile {
@@ -194,18 +276,20 @@ impl InputFile {
             ),
             Err(reason) => (ReadMode::Linear { reason }, None),
         };
-        let catalog = match &summary {
+        let (catalog, copyable) = match &summary {
             Some(summary) => {
                 let mut catalog = Catalog::from_summary(summary);
-                for (channel_id, (first, last)) in
-                    indexed::channel_time_spans(path, summary, &options)
-                {
+                let scan = chunks::scan_message_indexes(path, summary, &options);
+                for (channel_id, (first, last)) in scan.spans {
                     catalog.first_log_time_ns.insert(channel_id, first);
                     catalog.last_log_time_ns.insert(channel_id, last);
                 }
-                catalog
+                (catalog, scan.copyable)
             }
-            None => linear::list_catalog(path, &options)?,
+            None => (
+                linear::list_catalog(path, &options)?,
+                Err("the file is read linearly".into()),
+            ),
         };
         Ok(Self {
             path: path.to_path_buf(),
@@ -213,6 +297,7 @@ impl InputFile {
             catalog: Arc::new(catalog),
             mode,
             summary,
+            copyable,
         })
     }
 
@@ -221,8 +306,16 @@ impl InputFile {
     pub fn force_linear(&mut self, reason: String) -> Result<(), InputError> {
         self.catalog = Arc::new(linear::list_catalog(&self.path, &self.options)?);
         self.summary = None;
+        self.copyable = Err("the file is read linearly".into());
         self.mode = ReadMode::Linear { reason };
         Ok(())
+    }
+
+    /// Why the chunks cannot be copied byte for byte into the output, if they
+    /// cannot: the file must be indexed, every message indexed, and its
+    /// messages in log-time order in file order.
+    pub fn copy_blocker(&self) -> Option<&str> {
+        self.copyable.as_ref().err().map(String::as_str)
     }
 
     pub fn path(&self) -> &Path {
@@ -254,6 +347,29 @@ impl InputFile {
             Some(summary) => indexed::read(&self.path, summary, &self.options, strict, sink),
             None => linear::read(&self.path, &self.options, sink),
         }
+    }
+
+    /// Stream the file for a pass-through output: metadata and attachment
+    /// records as stored, then every chunk whole in file order, each followed
+    /// by its messages on `selected` channels (decompressed only when it holds
+    /// one, or with `verify_crc`). `strict` makes a bad chunk CRC fatal;
+    /// otherwise that chunk's messages come as [`CopyEvent::Salvaged`].
+    pub fn read_copying(
+        &self,
+        strict: bool,
+        selected: &BTreeSet<u16>,
+        sink: &mut dyn FnMut(CopyEvent<'_>) -> Flow,
+    ) -> Result<ReadReport, InputError> {
+        let (Some(summary), None) = (&self.summary, self.copy_blocker()) else {
+            return Err(InputError::Invalid {
+                path: self.path.clone(),
+                what: format!(
+                    "its chunks cannot be copied as they are: {}",
+                    self.copy_blocker().unwrap_or("the file has no summary")
+                ),
+            });
+        };
+        chunks::read(&self.path, summary, &self.options, strict, selected, sink)
     }
 }
 

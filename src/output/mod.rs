@@ -2,12 +2,20 @@
 //! message (same bytes, times and sequence), metadata record and attachment,
 //! and adds our own channels under ids the input does not use.
 //!
-//! The output goes to a temporary file beside the destination and is renamed
-//! only when complete, so a failed run never leaves a half-written log under
-//! the requested name.
+//! Two backends: the rewrite ([`mcap::Writer`]: every message written anew
+//! into new chunks) and the pass-through ([`passthrough`]: the input's chunk
+//! records copied byte for byte, our messages in chunks of their own,
+//! compressed in parallel). Either way the output goes to a temporary file
+//! beside the destination and is renamed only when complete ([`temp`]), so a
+//! failed run never leaves a half-written log under the requested name.
 
+mod chunk;
 mod ids;
 pub mod pairs;
+mod passthrough;
+mod raw;
+mod summary;
+mod temp;
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -16,9 +24,23 @@ use std::path::{Path, PathBuf};
 
 use mcap::records::MessageHeader;
 
-use crate::input::{Catalog, InputAttachment, InputMessage};
+use crate::input::{Catalog, CopiedRecord, InputAttachment, InputMessage};
 
 pub use ids::IdAllocator;
+use passthrough::{PassThroughWriter, SideKind};
+use temp::TempOutput;
+
+/// How the output is written.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+#[serde(tag = "mode", rename_all = "snake_case")]
+pub enum WriteMode {
+    /// The input's chunks copied byte for byte, our messages in chunks of
+    /// their own.
+    PassThrough,
+    /// Every input message written anew, in log-time order; `reason` says
+    /// why the chunks were not copied.
+    Rewrite { reason: String },
+}
 
 /// Chunk compression of the output.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
@@ -71,6 +93,11 @@ pub enum OutputError {
         path: PathBuf,
         source: mcap::McapError,
     },
+    #[error("{path}: writing failed: {source}")]
+    WriteIo {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: finishing the output failed: {source}")]
     Finish {
         path: PathBuf,
@@ -78,6 +105,8 @@ pub enum OutputError {
     },
     #[error("{path}: no free {what} id left for our own records")]
     NoFreeId { path: PathBuf, what: &'static str },
+    #[error("{path}: an input record to copy as it is reached a writer that rewrites the input")]
+    CopyNeedsPassThrough { path: PathBuf },
 }
 
 /// Refuse `output` when it is `input` (same file, whatever the spelling) or
@@ -110,52 +139,88 @@ fn same_file(a: &Path, b: &Path) -> bool {
 
 /// An output MCAP being written to its temporary file.
 pub struct OutputWriter {
-    final_path: PathBuf,
-    force: bool,
-    temp: tempfile::TempPath,
-    writer: mcap::Writer<BufWriter<File>>,
+    target: TempOutput,
+    backend: Backend,
     schema_ids: IdAllocator,
     channel_ids: IdAllocator,
 }
 
+enum Backend {
+    /// Every record written anew by the `mcap` crate.
+    Rewrite(Box<mcap::Writer<BufWriter<File>>>),
+    /// Input chunks copied as they are; the rest written by us.
+    PassThrough(Box<PassThroughWriter<BufWriter<File>>>),
+}
+
+/// What [`OutputWriter::copy`] copied, for the counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Copied {
+    /// A chunk holding this many messages.
+    Messages(u64),
+    Metadata,
+    Attachment,
+}
+
+/// Buffer between the writer and the file.
+const FILE_BUFFER_BYTES: usize = 1 << 20;
+
 impl OutputWriter {
     /// Create the temporary output beside `final_path` and register every input
-    /// schema and channel under its own id.
+    /// schema and channel under its own id; every record will be written anew.
     pub fn create(
         final_path: &Path,
         options: &OutputOptions,
         catalog: &Catalog,
     ) -> Result<Self, OutputError> {
-        let create_err = |source| OutputError::Create {
-            path: final_path.to_path_buf(),
-            source,
+        Self::create_as(final_path, options, catalog, false)
+    }
+
+    /// [`Self::create`] for a pass-through output: input chunks are then
+    /// given to [`Self::copy`], and only our messages (and input messages
+    /// written anew) are chunked here.
+    pub fn create_pass_through(
+        final_path: &Path,
+        options: &OutputOptions,
+        catalog: &Catalog,
+    ) -> Result<Self, OutputError> {
+        Self::create_as(final_path, options, catalog, true)
+    }
+
+    fn create_as(
+        final_path: &Path,
+        options: &OutputOptions,
+        catalog: &Catalog,
+        pass_through: bool,
+    ) -> Result<Self, OutputError> {
+        let (target, file) = TempOutput::create(final_path, options.force)?;
+        let file = BufWriter::with_capacity(FILE_BUFFER_BYTES, file);
+        let backend = if pass_through {
+            let header = mcap::records::Header {
+                profile: options.profile.clone(),
+                library: library_name(),
+            };
+            let compression = chunk::ChunkCompression {
+                kind: options.compression,
+                level: options.compression_level,
+            };
+            PassThroughWriter::new(file, &header, compression, options.chunk_size_bytes)
+                .map(|writer| Backend::PassThrough(Box::new(writer)))
+                .map_err(|source| OutputError::WriteIo {
+                    path: final_path.to_path_buf(),
+                    source,
+                })?
+        } else {
+            write_options(options)
+                .create(file)
+                .map(|writer| Backend::Rewrite(Box::new(writer)))
+                .map_err(|source| OutputError::Write {
+                    path: final_path.to_path_buf(),
+                    source,
+                })?
         };
-        let dir = match final_path.parent() {
-            Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let file_name = final_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "output".into());
-        std::fs::create_dir_all(&dir).map_err(create_err)?;
-        let temp_file = tempfile::Builder::new()
-            .prefix(&format!(".{file_name}."))
-            .suffix(".tmp")
-            .tempfile_in(&dir)
-            .map_err(create_err)?;
-        let (file, temp) = temp_file.into_parts();
-        let writer = write_options(options)
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(|source| OutputError::Write {
-                path: final_path.to_path_buf(),
-                source,
-            })?;
         let mut output = Self {
-            final_path: final_path.to_path_buf(),
-            force: options.force,
-            temp,
-            writer,
+            target,
+            backend,
             schema_ids: IdAllocator::new(catalog.used_schema_ids(), 1),
             channel_ids: IdAllocator::new(catalog.used_channel_ids(), 0),
         };
@@ -165,58 +230,117 @@ impl OutputWriter {
 
     fn register_input(&mut self, catalog: &Catalog) -> Result<(), OutputError> {
         for schema in catalog.schemas.values() {
-            self.writer
-                .add_schema_with_id(schema.id, &schema.name, &schema.encoding, &schema.data)
-                .map_err(|e| self.write_err(e))?;
+            self.add_schema(schema.id, &schema.name, &schema.encoding, &schema.data)?;
         }
         for channel in catalog.channels.values() {
             let schema_id = channel.schema.as_ref().map_or(0, |s| s.id);
-            self.writer
-                .add_channel_with_id(
-                    channel.id,
-                    schema_id,
-                    &channel.topic,
-                    &channel.message_encoding,
-                    &channel.metadata,
-                )
-                .map_err(|e| self.write_err(e))?;
+            self.add_channel(
+                channel.id,
+                schema_id,
+                &channel.topic,
+                &channel.message_encoding,
+                &channel.metadata,
+            )?;
         }
         Ok(())
     }
 
     fn write_err(&self, source: mcap::McapError) -> OutputError {
         OutputError::Write {
-            path: self.final_path.clone(),
+            path: self.target.final_path().to_path_buf(),
             source,
+        }
+    }
+
+    fn io_err(&self, source: std::io::Error) -> OutputError {
+        OutputError::WriteIo {
+            path: self.target.final_path().to_path_buf(),
+            source,
+        }
+    }
+
+    fn add_schema(
+        &mut self,
+        id: u16,
+        name: &str,
+        encoding: &str,
+        data: &[u8],
+    ) -> Result<(), OutputError> {
+        match &mut self.backend {
+            Backend::Rewrite(writer) => writer
+                .add_schema_with_id(id, name, encoding, data)
+                .map(|_| ())
+                .map_err(|e| self.write_err(e)),
+            Backend::PassThrough(writer) => {
+                let header = mcap::records::SchemaHeader {
+                    id,
+                    name: name.into(),
+                    encoding: encoding.into(),
+                };
+                writer.add_schema(header, data).map_err(|e| self.io_err(e))
+            }
+        }
+    }
+
+    fn add_channel(
+        &mut self,
+        id: u16,
+        schema_id: u16,
+        topic: &str,
+        message_encoding: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<(), OutputError> {
+        match &mut self.backend {
+            Backend::Rewrite(writer) => writer
+                .add_channel_with_id(id, schema_id, topic, message_encoding, metadata)
+                .map(|_| ())
+                .map_err(|e| self.write_err(e)),
+            Backend::PassThrough(writer) => {
+                let channel = mcap::records::Channel {
+                    id,
+                    schema_id,
+                    topic: topic.into(),
+                    message_encoding: message_encoding.into(),
+                    metadata: metadata.clone(),
+                };
+                writer.add_channel(channel).map_err(|e| self.io_err(e))
+            }
         }
     }
 
     /// Add one of our own channels (and its schema) under fresh ids.
     pub fn add_own_channel(&mut self, spec: &OwnChannelSpec) -> Result<u16, OutputError> {
         let no_id = |what| OutputError::NoFreeId {
-            path: self.final_path.clone(),
+            path: self.target.final_path().to_path_buf(),
             what,
         };
         let schema_id = self.schema_ids.next().ok_or_else(|| no_id("schema"))?;
         let channel_id = self.channel_ids.next().ok_or_else(|| no_id("channel"))?;
-        self.writer
-            .add_schema_with_id(
-                schema_id,
-                &spec.schema_name,
-                &spec.schema_encoding,
-                &spec.schema_data,
-            )
-            .map_err(|e| self.write_err(e))?;
-        self.writer
-            .add_channel_with_id(
-                channel_id,
-                schema_id,
-                &spec.topic,
-                &spec.message_encoding,
-                &BTreeMap::new(),
-            )
-            .map_err(|e| self.write_err(e))?;
+        self.add_schema(
+            schema_id,
+            &spec.schema_name,
+            &spec.schema_encoding,
+            &spec.schema_data,
+        )?;
+        self.add_channel(
+            channel_id,
+            schema_id,
+            &spec.topic,
+            &spec.message_encoding,
+            &BTreeMap::new(),
+        )?;
         Ok(channel_id)
+    }
+
+    fn write_message(&mut self, header: &MessageHeader, data: &[u8]) -> Result<(), OutputError> {
+        match &mut self.backend {
+            Backend::Rewrite(writer) => writer
+                .write_to_known_channel(header, data)
+                .map_err(|e| self.write_err(e)),
+            Backend::PassThrough(writer) => writer
+                .write_message(header, data)
+                .map_err(|e| self.io_err(e)),
+        }
     }
 
     /// Copy one input message unchanged.
@@ -227,9 +351,7 @@ impl OutputWriter {
             log_time: message.log_time_ns,
             publish_time: message.publish_time_ns,
         };
-        self.writer
-            .write_to_known_channel(&header, &message.data)
-            .map_err(|e| self.write_err(e))
+        self.write_message(&header, &message.data)
     }
 
     /// Write one message on one of our channels.
@@ -246,70 +368,89 @@ impl OutputWriter {
             log_time: log_time_ns,
             publish_time: log_time_ns,
         };
-        self.writer
-            .write_to_known_channel(&header, data)
-            .map_err(|e| self.write_err(e))
+        self.write_message(&header, data)
+    }
+
+    /// Copy an input record byte for byte (pass-through outputs only).
+    pub fn copy(&mut self, record: &CopiedRecord) -> Result<Copied, OutputError> {
+        let Backend::PassThrough(writer) = &mut self.backend else {
+            return Err(OutputError::CopyNeedsPassThrough {
+                path: self.target.final_path().to_path_buf(),
+            });
+        };
+        let copied = match record {
+            CopiedRecord::Chunk(chunk) => writer
+                .copy_chunk(chunk)
+                .map(|()| Copied::Messages(chunk.message_counts.values().sum())),
+            CopiedRecord::Side(side) => writer.copy_side_record(side).map(|kind| match kind {
+                SideKind::Metadata => Copied::Metadata,
+                SideKind::Attachment => Copied::Attachment,
+            }),
+        };
+        copied.map_err(|e| self.io_err(e))
     }
 
     pub fn write_metadata(
         &mut self,
         metadata: &mcap::records::Metadata,
     ) -> Result<(), OutputError> {
-        self.writer
-            .write_metadata(metadata)
-            .map_err(|e| self.write_err(e))
+        match &mut self.backend {
+            Backend::Rewrite(writer) => writer
+                .write_metadata(metadata)
+                .map_err(|e| self.write_err(e)),
+            Backend::PassThrough(writer) => {
+                writer.write_metadata(metadata).map_err(|e| self.io_err(e))
+            }
+        }
     }
 
     pub fn write_attachment(&mut self, attachment: &InputAttachment) -> Result<(), OutputError> {
-        let attachment = mcap::Attachment {
-            log_time: attachment.log_time_ns,
-            create_time: attachment.create_time_ns,
-            name: attachment.name.clone(),
-            media_type: attachment.media_type.clone(),
-            data: std::borrow::Cow::Borrowed(&attachment.data),
-        };
-        self.writer
-            .attach(&attachment)
-            .map_err(|e| self.write_err(e))
+        match &mut self.backend {
+            Backend::Rewrite(writer) => {
+                let attachment = mcap::Attachment {
+                    log_time: attachment.log_time_ns,
+                    create_time: attachment.create_time_ns,
+                    name: attachment.name.clone(),
+                    media_type: attachment.media_type.clone(),
+                    data: std::borrow::Cow::Borrowed(&attachment.data),
+                };
+                writer.attach(&attachment).map_err(|e| self.write_err(e))
+            }
+            Backend::PassThrough(writer) => writer
+                .write_attachment(attachment)
+                .map_err(|e| self.io_err(e)),
+        }
     }
 
     /// Finish the file (summary, footer), flush it to disk and move it to its
     /// final name. Returns the final size in bytes.
-    pub fn finish(mut self) -> Result<u64, OutputError> {
-        self.writer.finish().map_err(|e| self.write_err(e))?;
-        let finish_err = |source| OutputError::Finish {
-            path: self.final_path.clone(),
-            source,
+    pub fn finish(self) -> Result<u64, OutputError> {
+        let path = self.target.final_path().to_path_buf();
+        let buffered = match self.backend {
+            Backend::Rewrite(mut writer) => {
+                writer.finish().map_err(|source| OutputError::Write {
+                    path: path.clone(),
+                    source,
+                })?;
+                writer.into_inner()
+            }
+            Backend::PassThrough(writer) => {
+                writer.finish().map_err(|source| OutputError::WriteIo {
+                    path: path.clone(),
+                    source,
+                })?
+            }
         };
-        let file = self
-            .writer
-            .into_inner()
-            .into_inner()
-            .map_err(|e| finish_err(e.into_error()))?;
-        // Temporary files are created private (0600); the output is an
-        // ordinary file.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            file.set_permissions(std::fs::Permissions::from_mode(0o644))
-                .map_err(finish_err)?;
-        }
-        file.sync_all().map_err(finish_err)?;
-        let size = file.metadata().map_err(finish_err)?.len();
-        drop(file);
-        if !self.force && self.final_path.exists() {
-            return Err(OutputError::Exists {
-                path: self.final_path,
-            });
-        }
-        self.temp
-            .persist(&self.final_path)
-            .map_err(|e| OutputError::Finish {
-                path: self.final_path.clone(),
-                source: e.error,
-            })?;
-        Ok(size)
+        let file = buffered.into_inner().map_err(|e| OutputError::Finish {
+            path,
+            source: e.into_error(),
+        })?;
+        self.target.persist(file)
     }
+}
+
+fn library_name() -> String {
+    format!("looming/{}", env!("CARGO_PKG_VERSION"))
 }
 
 fn write_options(options: &OutputOptions) -> mcap::WriteOptions {
@@ -323,7 +464,7 @@ fn write_options(options: &OutputOptions) -> mcap::WriteOptions {
         .chunk_size(Some(options.chunk_size_bytes))
         .profile(options.profile.as_str())
         .compression_level(options.compression_level)
-        .library(format!("looming/{}", env!("CARGO_PKG_VERSION")))
+        .library(library_name())
         // Single-threaded zstd: the writer already runs on its own pipeline
         // thread, and this keeps the bytes identical on any machine.
         .compression_threads(0)
