@@ -130,13 +130,17 @@ commit = open(f"{d}/commit").read().strip()
 print(f"safe-drive {beams} x {columns}, {scans} scans ({scans / SCAN_HZ:.0f} s at {SCAN_HZ:.0f} Hz), "
       f"input {in_bytes / 1e6:.0f} MB; {cores} cores; commit {commit}; synth took {synth_wall:.0f} s.")
 print()
-print("| run | wall s | CPU s | other CPU s | scans/s | x real time | time / copy | peak RSS MiB | RSS / copy | output MB | output / input |")
+print("| run | wall s | CPU s | other CPU s | scans/s | x real time | throughput / copy | peak RSS MiB | RSS / copy | output MB | output / input |")
 print("|---|---|---|---|---|---|---|---|---|---|---|")
 for label, r in runs:
     wall, cpu, rss = t[r]
     sps = scans / wall
     print(f"| {label} | {wall:.1f} | {cpu:.1f} | {other[r]:.1f} | {sps:.1f} | {sps / SCAN_HZ:.2f} | "
-          f"{wall / cw:.1f} | {rss:.0f} | {rss / crss:.1f} | {b[r] / 1e6:.0f} | {b[r] / in_bytes:.3f} |")
+          f"{cw / wall:.2f} | {rss:.0f} | {rss / crss:.1f} | {b[r] / 1e6:.0f} | {b[r] / in_bytes:.3f} |")
+print()
+print("throughput / copy: the copy's wall time over the run's (1.0 = as fast as a bare copy). "
+      "Output written by: " + ", ".join(
+          f"{r}: {summaries[r].get('write', {}).get('mode', '?')}" for r in ("process", "full")) + ".")
 print()
 print("CPU s: user + system of the run; other CPU s: what the rest of the machine used "
       "meanwhile (/proc/stat), near 0 when the run was alone.")

@@ -6,6 +6,7 @@
 //! [`pipeline`] wires them together on threads with bounded channels.
 
 pub mod annotate;
+pub mod budget;
 pub mod decode;
 pub mod engine;
 pub mod eval;

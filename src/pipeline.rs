@@ -12,6 +12,9 @@ use std::time::Instant;
 use crate::annotate::{AnnotateConfig, AnnotateStats, Annotator, OwnMessage, channel_specs};
 use crate::decode::{self, DecodeLimits};
 use crate::events::{EventsFile, NearMissEvent};
+use std::sync::Arc;
+
+use crate::budget::{ByteBudget, Ticket};
 use crate::input::{Catalog, CopiedRecord, CopyEvent};
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
 use crate::messages::Decoded;
@@ -25,6 +28,10 @@ use crate::topics::{Role, SelectedChannel, TopicError, TopicOverrides, TopicSele
 /// Items between the reader and pairing stages. Channels hold few items: point
 /// clouds are megabytes each.
 const STAGE_QUEUE_LEN: usize = 32;
+/// Bytes of copied input records (chunks, attachments) read ahead of the
+/// writer at most (one record bigger than this still passes, alone): a
+/// dozen 4 MiB chunks, more than a second of a 64-beam sensor's log.
+const COPY_BUDGET_BYTES: u64 = 48 << 20;
 
 /// Everything `looming process` needs to know.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -318,8 +325,9 @@ struct WriterCounts {
 #[allow(clippy::large_enum_variant)]
 enum FromReader {
     Record(InputRecord),
-    /// An input record to copy as it is (pass-through).
-    Copy(CopiedRecord),
+    /// An input record to copy as it is (pass-through), its bytes counted
+    /// in the copy budget until written.
+    Copy(CopiedRecord, Ticket),
     Decoded {
         log_time_ns: u64,
         decoded: Decoded,
@@ -330,7 +338,7 @@ enum FromReader {
 /// Items for the writer.
 enum ToWriter {
     Input(InputRecord),
-    Copy(CopiedRecord),
+    Copy(CopiedRecord, Ticket),
     Own(OwnMessage),
 }
 
@@ -427,6 +435,7 @@ fn read_and_decode(
             file_name: file_name.clone(),
         },
         tx,
+        copy_budget: ByteBudget::new(COPY_BUDGET_BYTES),
         strict: config.strict,
         strict_failure: None,
     };
@@ -454,6 +463,15 @@ fn read_and_decode(
         return Err(ProcessError::Strict(format!("{file_name}: {reason}")));
     }
     Ok(report)
+}
+
+/// Bytes a copied record holds while it waits to be written.
+fn copied_bytes(record: &CopiedRecord) -> u64 {
+    let bytes = match record {
+        CopiedRecord::Chunk(chunk) => chunk.record.len() + chunk.message_indexes.len(),
+        CopiedRecord::Side(side) => side.bytes.len(),
+    };
+    bytes as u64
 }
 
 /// A decoded message: its log time and what it holds.
@@ -496,6 +514,8 @@ impl Decoder<'_> {
 struct ReadStage<'a> {
     decoder: Decoder<'a>,
     tx: SyncSender<FromReader>,
+    /// Bytes of copied records read and not yet written.
+    copy_budget: Arc<ByteBudget>,
     strict: bool,
     /// The bad message that stopped a strict run.
     strict_failure: Option<BadMessage>,
@@ -528,7 +548,10 @@ impl ReadStage<'_> {
     /// messages to write anew.
     fn copy_event(&mut self, event: CopyEvent<'_>) -> Flow {
         match event {
-            CopyEvent::Copy(record) => self.send(FromReader::Copy(record)),
+            CopyEvent::Copy(record) => {
+                let ticket = self.copy_budget.acquire(copied_bytes(&record));
+                self.send(FromReader::Copy(record, ticket))
+            }
             CopyEvent::Selected(message) => {
                 let header = message.header;
                 let decoded = self
@@ -592,8 +615,8 @@ fn pair_scans(
                 }
                 continue;
             }
-            FromReader::Copy(record) => {
-                if tx.send(ToWriter::Copy(record)).is_err() {
+            FromReader::Copy(record, ticket) => {
+                if tx.send(ToWriter::Copy(record, ticket)).is_err() {
                     break;
                 }
                 continue;
@@ -723,7 +746,7 @@ fn write_all(
                 writer.write_attachment(&attachment)?;
                 counts.attachments += 1;
             }
-            ToWriter::Copy(record) => match writer.copy(&record)? {
+            ToWriter::Copy(record, _ticket) => match writer.copy(&record)? {
                 Copied::Messages(messages) => {
                     counts.messages += messages;
                     progress.update(counts.messages, total);
