@@ -38,8 +38,10 @@ impl ImageGeometry {
     /// Continuous column of an azimuth: 0 behind the sensor, `cols / 2` straight
     /// ahead, increasing clockwise seen from above; in [0, cols).
     pub fn col_f(&self, azimuth_rad: f64) -> f64 {
-        let turns = ((PI - azimuth_rad) / TAU).rem_euclid(1.0);
-        turns * self.cols as f64
+        // `rem_euclid(1.0)` without its `fmod` call (this runs for every
+        // vertex of every render): the same value, rounded once.
+        let turns = (PI - azimuth_rad) / TAU;
+        (turns - turns.floor()) * self.cols as f64
     }
 
     /// Cell column of an azimuth (nearest bin centre).

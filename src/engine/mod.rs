@@ -659,7 +659,7 @@ fn per_cell(
         .collect();
     let thresholds = config.threat_ttc_s;
     let threat = fused
-        .iter()
+        .par_iter()
         .zip(&raw)
         .map(|(f, r)| {
             if r.mask == 0 {
@@ -669,17 +669,16 @@ fn per_cell(
             }
         })
         .collect();
+    // Each field on both cores (eight passes over the image).
+    let field = |of: fn(&Raw) -> f32| raw.par_iter().map(of).collect::<Vec<f32>>();
     CellValues {
-        disagreement: raw.iter().map(|r| r.l_lidar - r.l_ray_ego).collect(),
-        l_lidar: raw.iter().map(|r| r.l_lidar).collect(),
-        l_ray_ego: raw.iter().map(|r| r.l_ray_ego).collect(),
-        confidence: raw
-            .iter()
-            .map(|r| 1.0 / (1.0 + (r.sigma / 0.05).powi(2)))
-            .collect(),
-        sigma: raw.iter().map(|r| r.sigma).collect(),
-        mask: raw.iter().map(|r| r.mask).collect(),
-        dt_s: raw.iter().map(|r| r.dt_s).collect(),
+        disagreement: field(|r| r.l_lidar - r.l_ray_ego),
+        l_lidar: field(|r| r.l_lidar),
+        l_ray_ego: field(|r| r.l_ray_ego),
+        confidence: field(|r| 1.0 / (1.0 + (r.sigma / 0.05).powi(2))),
+        sigma: field(|r| r.sigma),
+        mask: raw.par_iter().map(|r| r.mask).collect(),
+        dt_s: field(|r| r.dt_s),
         disagrees: candidate,
         moving,
         fused,
