@@ -226,9 +226,28 @@ impl Annotator {
     ) {
         let scan = &*pair.current;
         let log_time_ns = pair.current_log_time_ns;
-        let points = foxglove::looming_cloud(scan, looming, self.config.fields);
-        let disagreement = foxglove::disagreement_cloud(scan, looming);
-        let threat = foxglove::threat_cloud(scan, looming);
+        // The channels' messages built on both cores (the engine waits for
+        // them); pushed below in a fixed order.
+        let fields = self.config.fields;
+        let ((points, disagreement), (threat, images)) = rayon::join(
+            || {
+                rayon::join(
+                    || foxglove::looming_cloud(scan, looming, fields),
+                    || foxglove::disagreement_cloud(scan, looming),
+                )
+            },
+            || {
+                rayon::join(
+                    || foxglove::threat_cloud(scan, looming),
+                    || {
+                        rayon::join(
+                            || foxglove::range_image(scan, looming, &looming.fused),
+                            || foxglove::range_image(scan, looming, &looming.disagreement),
+                        )
+                    },
+                )
+            },
+        );
         self.stats.points_written += point_count(&points);
         self.stats.disagreement_points_written += point_count(&disagreement);
         self.stats.threat_points_written += point_count(&threat);
@@ -247,11 +266,12 @@ impl Annotator {
             zones.encode_to_vec(),
             out,
         );
-        for (channel, values) in [
-            (Channel::ImageFused, &looming.fused),
-            (Channel::ImageDisagreement, &looming.disagreement),
+        let (fused_image, disagreement_image) = images;
+        for (channel, image) in [
+            (Channel::ImageFused, fused_image),
+            (Channel::ImageDisagreement, disagreement_image),
         ] {
-            match foxglove::range_image(scan, looming, values) {
+            match image {
                 Ok(image) => self.push(channel, log_time_ns, image.encode_to_vec(), out),
                 // Only dimensions no PNG holds fail: the pair's other
                 // channels are still worth writing, so count and go on.
