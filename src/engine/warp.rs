@@ -408,7 +408,7 @@ fn rasterize_row(
         let bd = (b, d, joins[b] & JOIN_DOWN != 0);
         let dc = (c, d, joins[c] & JOIN_RIGHT != 0);
         for ([i, j, k], edges) in [([a, b, c], [ab, bc, ac]), ([b, d, c], [bd, dc, bc])] {
-            let (Some(vi), Some(vj), Some(vk)) = (vertices[i], vertices[j], vertices[k]) else {
+            let (Some(vi), Some(vj), Some(vk)) = (&vertices[i], &vertices[j], &vertices[k]) else {
                 continue;
             };
             if !edges
@@ -443,7 +443,7 @@ fn rasterize_ring(
     let mut out = Vec::new();
     for col in 0..cols {
         let (a, b) = (row * cols + col, row * cols + (col + 1) % cols);
-        let (Some(va), Some(vb)) = (vertices[a], vertices[b]) else {
+        let (Some(va), Some(vb)) = (&vertices[a], &vertices[b]) else {
             continue;
         };
         let joined = source.surfaces.joins[a] & JOIN_RIGHT != 0;
@@ -526,7 +526,7 @@ const MAX_SPAN_CELLS: f64 = 24.0;
 fn rasterize_triangle(
     target: &Target,
     geometry: &ImageGeometry,
-    v: [Vertex; 3],
+    v: [&Vertex; 3],
     edge: bool,
     out: &mut Vec<Candidate>,
 ) {
