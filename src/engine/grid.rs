@@ -126,10 +126,27 @@ impl ImageGeometry {
                 if (dr == 0 && dc == 0) || r < 0 || r >= self.rows as i64 {
                     return None;
                 }
-                let c = (col + dc).rem_euclid(self.cols as i64) as usize;
-                Some(r as usize * self.cols + c)
+                Some(r as usize * self.cols + wrap_col(col + dc, self.cols as i64))
             })
         })
+    }
+}
+
+/// `col.rem_euclid(cols)`, without an integer division where `col` is
+/// within one turn of the image (neighbours, triangles: every cell, many
+/// times per pair).
+pub(super) fn wrap_col(col: i64, cols: i64) -> usize {
+    let once = if col < 0 {
+        col + cols
+    } else if col >= cols {
+        col - cols
+    } else {
+        col
+    };
+    if (0..cols).contains(&once) {
+        once as usize
+    } else {
+        col.rem_euclid(cols) as usize
     }
 }
 

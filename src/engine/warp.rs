@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
-use super::grid::ImageGeometry;
+use super::grid::{ImageGeometry, wrap_col};
 use super::surface::Surfaces;
 use super::trajectory::Trajectory;
 use crate::messages::StampNs;
@@ -501,23 +501,6 @@ fn rasterize_ring(
         }
     }
     out
-}
-
-/// `col.rem_euclid(cols)`, without an integer division in the common
-/// case: a triangle's columns lie within one turn of the image.
-fn wrap_col(col: i64, cols: i64) -> usize {
-    let once = if col < 0 {
-        col + cols
-    } else if col >= cols {
-        col - cols
-    } else {
-        col
-    };
-    if (0..cols).contains(&once) {
-        once as usize
-    } else {
-        col.rem_euclid(cols) as usize
-    }
 }
 
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
