@@ -17,25 +17,13 @@ use prost_reflect::{DescriptorPool, DynamicMessage, Value};
 
 const POSITION_QUANTUM_M: f32 = looming::annotate::foxglove::POSITION_QUANTUM_M;
 
+/// A 32 x 512 synthetic drive.
 fn synth(dir: &Path, scenario: &str, extra: &[&str]) -> PathBuf {
-    let path = dir.join(format!("{scenario}.mcap"));
-    let mut args = vec![
-        "synth",
-        "--scenario",
+    common::synth(
+        dir,
         scenario,
-        "--beams",
-        "32",
-        "--columns",
-        "512",
-        "-o",
-        path.to_str().unwrap(),
-        "--force",
-        "-q",
-    ];
-    args.extend_from_slice(extra);
-    let out = looming(&args);
-    assert!(out.status.success(), "{}", stderr(&out));
-    path
+        &[&["--beams", "32", "--columns", "512"], extra].concat(),
+    )
 }
 
 fn process(input: &Path, output: &Path, extra: &[&str]) {

@@ -26,28 +26,23 @@ const SLACK: f64 = 0.10;
 
 fn eval_layout(layout: &str) -> serde_json::Value {
     let dir = scratch(&format!("layouts-{}", layout.replace(':', "_")));
-    let log = dir.join("cut-in.mcap");
     let json = dir.join("eval.json");
-    let run = looming(&[
-        "synth",
-        "--scenario",
+    let log = synth(
+        &dir,
         "cut-in",
-        "--start",
-        "2",
-        "--duration",
-        "4",
-        "--beams",
-        "32",
-        "--columns",
-        "512",
-        "--layout",
-        layout,
-        "-o",
-        log.to_str().unwrap(),
-        "--force",
-        "-q",
-    ]);
-    assert!(run.status.success(), "{layout}: synth: {}", stderr(&run));
+        &[
+            "--start",
+            "2",
+            "--duration",
+            "4",
+            "--beams",
+            "32",
+            "--columns",
+            "512",
+            "--layout",
+            layout,
+        ],
+    );
     let run = looming(&[
         "eval",
         log.to_str().unwrap(),

@@ -23,24 +23,15 @@ fn synth_drive(dir: &Path) -> PathBuf {
 }
 
 fn synth_drive_of(dir: &Path, duration_s: &str) -> PathBuf {
-    let path = dir.join("synth.mcap");
-    let run = looming(&[
-        "synth",
-        "--scenario",
-        "safe-drive",
+    let small = [
         "--beams",
         "32",
         "--columns",
         "512",
         "--duration",
         duration_s,
-        "-o",
-        path.to_str().unwrap(),
-        "--force",
-        "-q",
-    ]);
-    assert!(run.status.success(), "synth: {}", stderr(&run));
-    path
+    ];
+    common::synth(dir, "safe-drive", &small)
 }
 
 /// `synth` rewritten in `compression`, small chunks, with two attachments and

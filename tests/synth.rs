@@ -215,23 +215,6 @@ fn the_followed_car_does_not_loom_while_l_ego_says_it_does() {
     }
 }
 
-fn synth(dir: &std::path::Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
-    let out = dir.join(format!("{name}.mcap"));
-    let mut args = vec![
-        "synth",
-        "--scenario",
-        name,
-        "-o",
-        out.to_str().unwrap(),
-        "--force",
-        "-q",
-    ];
-    args.extend_from_slice(extra);
-    let run = looming(&args);
-    assert!(run.status.success(), "{name}: {}", stderr(&run));
-    out
-}
-
 #[test]
 fn the_same_arguments_give_the_same_bytes() {
     let dir = scratch("synth-determinism");

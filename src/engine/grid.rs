@@ -153,7 +153,12 @@ pub(super) fn wrap_col(col: i64, cols: i64) -> usize {
 /// Azimuth and elevation of a point.
 pub fn angles(p: &[f32; 3]) -> (f64, f64) {
     let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-    (y.atan2(x), z.atan2(x.hypot(y)))
+    (azimuth(p), z.atan2(x.hypot(y)))
+}
+
+/// Azimuth of a point (the first of [`angles`]).
+pub fn azimuth(p: &[f32; 3]) -> f64 {
+    f64::from(p[1]).atan2(f64::from(p[0]))
 }
 
 /// One scan gridded.
@@ -229,7 +234,7 @@ impl RangeImage {
 }
 
 fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) -> Option<usize> {
-    let azimuth = f64::from(p[1]).atan2(f64::from(p[0]));
+    let azimuth = azimuth(p);
     let row = match (&scan.ring, &geometry.ring_to_row) {
         (Some(rings), Some(ring_to_row)) => *ring_to_row.get(usize::from(rings[index]))?,
         // The elevation only where no ring gives the row.

@@ -7,7 +7,7 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::grid::{ImageGeometry, NO_POINT, RangeImage};
-use super::window_sums::RowSums;
+use super::window_sums::{RowSums, column_spans};
 use crate::messages::Scan;
 
 /// Per cell of one image.
@@ -271,8 +271,7 @@ fn direction_angles(surfaces: &Surfaces) -> (Vec<f64>, Vec<f64>) {
             if !range.is_finite() {
                 return (f64::NAN, f64::NAN);
             }
-            let (x, y, z) = (f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
-            (y.atan2(x), z.atan2(x.hypot(y)))
+            super::grid::angles(d)
         })
         .unzip()
 }
@@ -501,7 +500,7 @@ fn fit_whole_window(
     let mut moments = super::window_sums::Moments::default();
     for r in window_rows.clone() {
         moments = moments.plus(&returns.sums.window(r, col, half_cols)?);
-        let beyond_gate = window_columns(r * cols, col, half_cols, cols)
+        let beyond_gate = window_cells(r * cols, col, half_cols, cols)
             .flat_map(|span| &returns.ranges[span])
             .any(|&neighbour| (neighbour - range).abs() > gate_m);
         if beyond_gate {
@@ -518,7 +517,7 @@ fn fit_whole_window(
     // none exceeds the tolerance when that sum does not.
     if plane.smallest > WHOLE_WINDOW_MARGIN * tolerance * tolerance {
         let off_plane = window_rows
-            .flat_map(|r| window_columns(r * cols, col, half_cols, cols))
+            .flat_map(|r| window_cells(r * cols, col, half_cols, cols))
             .flat_map(|span| &returns.points[span])
             .any(|p| !p.x.is_nan() && (p - plane.centroid).dot(&plane.normal).abs() > tolerance);
         if off_plane {
@@ -541,25 +540,17 @@ fn fit_whole_window(
 /// the running sums).
 const WHOLE_WINDOW_MARGIN: f64 = 0.999;
 
-/// The cell ranges (one or two, as the window wraps around the sweep) of
-/// the columns `col - half_cols ..= col + half_cols` of the row starting at
-/// cell `row_start`.
-fn window_columns(
+/// The cells of the row starting at cell `row_start` in the window's
+/// columns (`window_sums::column_spans`; empty when wider than the image).
+fn window_cells(
     row_start: usize,
     col: usize,
     half_cols: usize,
     cols: usize,
 ) -> impl Iterator<Item = std::ops::Range<usize>> {
-    let (first, second) = if col >= half_cols && col + half_cols < cols {
-        (col - half_cols..col + half_cols + 1, 0..0)
-    } else if col < half_cols {
-        (0..col + half_cols + 1, cols + col - half_cols..cols)
-    } else {
-        (col - half_cols..cols, 0..col + half_cols + 1 - cols)
-    };
-    [first, second]
+    column_spans(col, half_cols, cols)
         .into_iter()
-        .filter(|span| !span.is_empty())
+        .flatten()
         .map(move |span| row_start + span.start..row_start + span.end)
 }
 

@@ -122,30 +122,36 @@ impl RowSums {
     /// half_cols` (wrapping around the sweep); None when the window is wider
     /// than the image.
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<Moments> {
-        let cols = self.cols;
-        if 2 * half_cols + 1 > cols || col >= cols {
-            return None;
+        let base = row * (self.cols + 1);
+        let mut total = Moments::default();
+        for span in column_spans(col, half_cols, self.cols)? {
+            let to = self.running.get(base + span.end)?;
+            let from = self.running.get(base + span.start)?;
+            total = total.plus(&to.minus(from));
         }
-        let base = row * (cols + 1);
-        let span = |from: usize, to: usize| {
-            self.running
-                .get(base + to)
-                .zip(self.running.get(base + from))
-                .map(|(to, from)| to.minus(from))
-        };
-        if col >= half_cols && col + half_cols < cols {
-            span(col - half_cols, col + half_cols + 1)
-        } else if col < half_cols {
-            // Wraps past column 0: the start of the row and its end.
-            let head = span(0, col + half_cols + 1)?;
-            let tail = span(cols + col - half_cols, cols)?;
-            Some(head.plus(&tail))
-        } else {
-            let head = span(col - half_cols, cols)?;
-            let tail = span(0, col + half_cols + 1 - cols)?;
-            Some(head.plus(&tail))
-        }
+        Some(total)
     }
+}
+
+/// The columns `col - half_cols ..= col + half_cols` of an image `cols`
+/// wide as at most two ranges (where the window wraps around the sweep);
+/// None when the window is wider than the image.
+pub(super) fn column_spans(
+    col: usize,
+    half_cols: usize,
+    cols: usize,
+) -> Option<impl Iterator<Item = std::ops::Range<usize>>> {
+    if 2 * half_cols + 1 > cols || col >= cols {
+        return None;
+    }
+    let (first, second) = if col >= half_cols && col + half_cols < cols {
+        (col - half_cols..col + half_cols + 1, 0..0)
+    } else if col < half_cols {
+        (0..col + half_cols + 1, cols + col - half_cols..cols)
+    } else {
+        (col - half_cols..cols, 0..col + half_cols + 1 - cols)
+    };
+    Some([first, second].into_iter().filter(|span| !span.is_empty()))
 }
 
 #[cfg(test)]

@@ -188,6 +188,24 @@ pub fn looming(args: &[&str]) -> Output {
         .expect("the looming binary runs")
 }
 
+/// Run `looming synth --scenario SCENARIO EXTRA...` into `DIR/SCENARIO.mcap`.
+pub fn synth(dir: &Path, scenario: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(format!("{scenario}.mcap"));
+    let mut args = vec![
+        "synth",
+        "--scenario",
+        scenario,
+        "-o",
+        out.to_str().unwrap(),
+        "--force",
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    let run = looming(&args);
+    assert!(run.status.success(), "{scenario}: {}", stderr(&run));
+    out
+}
+
 /// Run `looming process INPUT -o OUTPUT EXTRA...`.
 pub fn looming_process(input: &Path, output: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
