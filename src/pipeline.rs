@@ -903,12 +903,7 @@ fn write_events_file(
         path: path.to_path_buf(),
         source,
     };
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&dir).map_err(err)?;
-    let mut temp = tempfile::NamedTempFile::new_in(&dir).map_err(err)?;
+    let mut temp = crate::output::temp_beside(path).map_err(err)?;
     serde_json::to_writer_pretty(&mut temp, &file).map_err(|e| err(e.into()))?;
     temp.persist(path).map_err(|e| err(e.error))?;
     Ok(())

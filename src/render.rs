@@ -443,12 +443,7 @@ fn write_png(image: &RgbImage, path: &Path, force: bool) -> Result<(), RenderErr
         path: path.to_path_buf(),
         source,
     };
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&dir).map_err(io_err)?;
-    let temp = tempfile::NamedTempFile::new_in(&dir).map_err(io_err)?;
+    let temp = crate::output::temp_beside(path).map_err(io_err)?;
     let mut writer = BufWriter::new(temp);
     image::codecs::png::PngEncoder::new(&mut writer)
         .write_image(

@@ -16,6 +16,7 @@ mod passthrough;
 mod raw;
 mod summary;
 mod temp;
+pub(crate) use temp::beside as temp_beside;
 
 use std::collections::BTreeMap;
 use std::fs::File;

@@ -6,7 +6,29 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use tempfile::NamedTempFile;
+
 use super::OutputError;
+
+/// A new temporary file beside `path` (its directory created if need be),
+/// named after it (`.NAME.XXXXXX.tmp`): what every output of the tool
+/// (logs, events files, renders) is written into before it is renamed
+/// onto `path`.
+pub(crate) fn beside(path: &Path) -> std::io::Result<NamedTempFile> {
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".into());
+    std::fs::create_dir_all(&dir)?;
+    tempfile::Builder::new()
+        .prefix(&format!(".{file_name}."))
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+}
 
 /// Where the output goes once complete, and the temporary file until then.
 pub(super) struct TempOutput {
@@ -22,20 +44,7 @@ impl TempOutput {
             path: final_path.to_path_buf(),
             source,
         };
-        let dir = match final_path.parent() {
-            Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let file_name = final_path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "output".into());
-        std::fs::create_dir_all(&dir).map_err(create_err)?;
-        let temp_file = tempfile::Builder::new()
-            .prefix(&format!(".{file_name}."))
-            .suffix(".tmp")
-            .tempfile_in(&dir)
-            .map_err(create_err)?;
+        let temp_file = beside(final_path).map_err(create_err)?;
         let (file, temp) = temp_file.into_parts();
         let output = Self {
             final_path: final_path.to_path_buf(),
