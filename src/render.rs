@@ -458,14 +458,6 @@ fn write_png(image: &RgbImage, path: &Path, force: bool) -> Result<(), RenderErr
         })?;
     writer.flush().map_err(io_err)?;
     let temp = writer.into_inner().map_err(|e| io_err(e.into_error()))?;
-    // Temporary files are created private (0600); the output is an ordinary file.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        temp.as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(io_err)?;
-    }
     temp.as_file().sync_all().map_err(io_err)?;
     let persisted = if force {
         temp.persist(path)

@@ -165,6 +165,14 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
             events_path.to_str().unwrap(),
         ],
     );
+    // The log and the events file are ordinary files (not the temporary
+    // file's private mode).
+    #[cfg(unix)]
+    for written in [&output, &events_path] {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(written).unwrap().permissions().mode();
+        assert_eq!(mode & 0o044, 0o044, "{} mode {mode:o}", written.display());
+    }
     let contents = read_all(&std::fs::read(&output).unwrap());
     let engine = engine_results(&input);
     assert!(engine.len() >= 9, "{} pairs", engine.len());

@@ -24,10 +24,17 @@ pub(crate) fn beside(path: &Path) -> std::io::Result<NamedTempFile> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "output".into());
     std::fs::create_dir_all(&dir)?;
-    tempfile::Builder::new()
-        .prefix(&format!(".{file_name}."))
-        .suffix(".tmp")
-        .tempfile_in(&dir)
+    let prefix = format!(".{file_name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    // An ordinary file once renamed (temporary files are private, 0600, by
+    // default; the umask still applies).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    builder.tempfile_in(&dir)
 }
 
 /// Where the output goes once complete, and the temporary file until then.
@@ -65,14 +72,6 @@ impl TempOutput {
             path: self.final_path.clone(),
             source,
         };
-        // Temporary files are created private (0600); the output is an
-        // ordinary file.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            file.set_permissions(std::fs::Permissions::from_mode(0o644))
-                .map_err(finish_err)?;
-        }
         file.sync_all().map_err(finish_err)?;
         let size = file.metadata().map_err(finish_err)?.len();
         drop(file);
