@@ -59,29 +59,35 @@ impl ImageGeometry {
     /// its own row near the sensor (each return's coordinate then lies
     /// within its cell, which the renderer relies on).
     pub fn row_f_at(&self, elevation_rad: f64, range_m: f64) -> f64 {
-        let Some(parallax) = &self.parallax_rad_m else {
-            return self.row_f(elevation_rad);
-        };
+        self.row_f_near(elevation_rad, range_m, None)
+    }
+
+    /// [`row_f_at`](Self::row_f_at), searching the beams outward from
+    /// `near_row` (a row at or next to the answer, as a return's own row is
+    /// after the motion between two scans) instead of by bisection: the
+    /// same value where the beams are in elevation order, in a step or two
+    /// instead of six unpredictable ones (every vertex of every render).
+    pub fn row_f_near(&self, elevation_rad: f64, range_m: f64, near_row: Option<usize>) -> f64 {
         let beams = &self.beams.elevations_rad;
-        let n = beams.len().min(parallax.len());
-        if n < 2 || range_m.is_nan() || range_m <= 0.0 {
+        let parallax = self
+            .parallax_rad_m
+            .as_deref()
+            .filter(|_| range_m > 0.0 && !range_m.is_nan());
+        let n = parallax.map_or(beams.len(), |p| beams.len().min(p.len()));
+        if n < 2 {
             return self.row_f(elevation_rad);
         }
         // One division per return, not one per probe of the search.
         let inverse_range = 1.0 / range_m;
-        let at = |k: usize| beams[k] + parallax[k] * inverse_range;
-        // Rows are in elevation order at any range the model holds; a
-        // binary search over the beams evaluated at this range.
-        let (mut lo, mut hi) = (0usize, n);
-        while lo < hi {
-            let mid = (lo + hi) / 2;
-            if at(mid) <= elevation_rad {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-        }
-        let k = lo.clamp(1, n - 1) - 1;
+        let at = |k: usize| match parallax {
+            Some(parallax) => beams[k] + parallax[k] * inverse_range,
+            None => beams[k],
+        };
+        let below = match near_row {
+            Some(row) => walk_to_partition(n, &at, elevation_rad, row),
+            None => bisect_to_partition(n, &at, elevation_rad),
+        };
+        let k = below.clamp(1, n - 1) - 1;
         let span = at(k + 1) - at(k);
         if span > 0.0 {
             k as f64 + (elevation_rad - at(k)) / span
@@ -130,6 +136,38 @@ impl ImageGeometry {
             })
         })
     }
+}
+
+/// How many of the increasing values `at(0..n)` are at or below `value`
+/// (`partition_point`), by bisection.
+fn bisect_to_partition(n: usize, at: &impl Fn(usize) -> f64, value: f64) -> usize {
+    let (mut lo, mut hi) = (0usize, n);
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        if at(mid) <= value {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// [`bisect_to_partition`] by walking from `start`: the same count for
+/// increasing values and a non-NaN `value`, in as many steps as `start` is
+/// away from it.
+fn walk_to_partition(n: usize, at: &impl Fn(usize) -> f64, value: f64, start: usize) -> usize {
+    if value.is_nan() {
+        return 0;
+    }
+    let mut k = start.min(n);
+    while k < n && at(k) <= value {
+        k += 1;
+    }
+    while k > 0 && at(k - 1) > value {
+        k -= 1;
+    }
+    k
 }
 
 /// `col.rem_euclid(cols)`, without an integer division where `col` is
@@ -513,4 +551,28 @@ fn least_squares(
         parallax_rad_m: Some(slope),
         ..medians
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn walking_finds_the_partition_bisection_finds() {
+        // Unevenly spaced increasing values, every start, values between,
+        // on and outside them.
+        let values = [-0.43, -0.4, -0.31, -0.3, -0.1, 0.0, 0.02, 0.2];
+        let at = |k: usize| values[k];
+        let n = values.len();
+        for probe in -50..=30 {
+            let value = f64::from(probe) * 0.01;
+            let bisected = bisect_to_partition(n, &at, value);
+            assert_eq!(bisected, values.partition_point(|&v| v <= value));
+            for start in 0..=n + 2 {
+                assert_eq!(walk_to_partition(n, &at, value, start), bisected);
+            }
+        }
+        assert_eq!(walk_to_partition(n, &at, f64::NAN, 4), 0);
+        assert_eq!(bisect_to_partition(n, &at, f64::NAN), 0);
+    }
 }

@@ -316,11 +316,7 @@ fn compute_from_surfaces(
         surfaces: prev_surfaces,
         time_ns: &prev_time,
     };
-    let target = warp::Target {
-        surfaces: cur_surfaces,
-        coords: &coords,
-        column_time_ns: &column_time,
-    };
+    let target = warp::Target::new(cur_surfaces, &coords, &column_time);
     let offset_ns = current.stamp_ns - previous.stamp_ns;
     let span = (start_ns, end_ns);
     // Not on sparse sensors: a ring's orientation there is a prior (ground

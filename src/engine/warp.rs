@@ -26,7 +26,53 @@ pub struct Target<'a> {
     pub coords: &'a [(f32, f32)],
     /// Median firing time of each column, ns (for a rolling sweep).
     pub column_time_ns: &'a [StampNs],
+    /// How far an occupied cell's coordinates lie from the cell's own
+    /// (row, column) at most, in rows and columns: a triangle can only
+    /// cover the cells this near its bounding box.
+    reach: (f64, f64),
 }
+
+impl<'a> Target<'a> {
+    pub fn new(
+        surfaces: &'a Surfaces,
+        coords: &'a [(f32, f32)],
+        column_time_ns: &'a [StampNs],
+    ) -> Self {
+        Self {
+            surfaces,
+            coords,
+            column_time_ns,
+            reach: coords_reach(surfaces, coords),
+        }
+    }
+}
+
+/// The largest distance, in rows and in columns (across the seam), of an
+/// occupied cell's coordinates from the cell's own row and column.
+fn coords_reach(surfaces: &Surfaces, coords: &[(f32, f32)]) -> (f64, f64) {
+    let cols = surfaces.cols;
+    let half_turn = cols as f64 / 2.0;
+    coords
+        .par_iter()
+        .enumerate()
+        .filter(|(cell, _)| surfaces.range_m[*cell].is_finite())
+        .map(|(cell, &(row_f, col_f))| {
+            let (row, col) = ((cell / cols) as f64, (cell % cols) as f64);
+            let mut col_off = f64::from(col_f) - col;
+            if col_off > half_turn {
+                col_off -= cols as f64;
+            } else if col_off < -half_turn {
+                col_off += cols as f64;
+            }
+            ((f64::from(row_f) - row).abs(), col_off.abs())
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
+}
+
+/// Added to a target's reach: a ray passes the triangle test up to its
+/// tolerance outside the triangle (1e-9 of barycentric weight, below 1e-7
+/// cells at the largest triangle).
+const REACH_SLACK: f64 = 1e-6;
 
 /// The previous surface along each target ray.
 #[derive(Debug, Clone)]
@@ -62,19 +108,19 @@ pub fn render(
     scan_offset_ns: StampNs,
 ) -> Rendered {
     let cells = geometry.cells();
+    let arrivals = arrival_poses(target.column_time_ns, trajectory);
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
         .into_par_iter()
         .map(|col| {
-            let mut cache = TransformCache::default();
+            let mut cache = TransformCache::new(trajectory, &arrivals);
             (0..geometry.rows)
                 .map(|row| {
                     warp_vertex(
                         source,
                         target,
                         geometry,
-                        trajectory,
                         scan_offset_ns,
                         row * geometry.cols + col,
                         &mut cache,
@@ -137,30 +183,90 @@ struct Candidate {
     edge: bool,
 }
 
-/// A relative transform and the (from, to) times it was computed for.
-type CachedTransform = ((StampNs, StampNs), Isometry3<f64>);
+/// Per target column, the inverse of the pose at its firing time
+/// (`lidar_from_reference`; the identity where the column has no time):
+/// the target end of every relative transform into that column, computed
+/// once per render instead of once per (return time, column) pair.
+fn arrival_poses(column_time_ns: &[StampNs], trajectory: &Trajectory) -> Vec<Isometry3<f64>> {
+    column_time_ns
+        .par_iter()
+        .map(|&time_ns| {
+            if time_ns == StampNs::MIN {
+                Isometry3::identity()
+            } else {
+                trajectory.pose(time_ns).inverse()
+            }
+        })
+        .collect()
+}
 
-/// The last relative transforms computed, keyed by (from, to) times.
-#[derive(Default)]
-struct TransformCache {
-    slots: [Option<CachedTransform>; 4],
+/// A transform from a time into a target column's frame, keyed by both.
+type ToColumn = ((StampNs, usize), Isometry3<f64>);
+
+/// Relative transforms of one column's returns, `pose(to)^-1 * pose(from)`
+/// as [`Trajectory::relative`] computes them (so the same values), each
+/// composed from a departure pose (the last one kept: a column's returns
+/// share their time) and an arrival pose: a target column's from the
+/// render's table, any other time's computed (the last one kept). The last
+/// transforms composed are kept too. (Keying whole transforms alone missed
+/// on three returns in four under translation, whose rows land in
+/// different target columns.)
+struct TransformCache<'a> {
+    trajectory: &'a Trajectory,
+    /// Per target column, from [`arrival_poses`].
+    arrivals: &'a [Isometry3<f64>],
+    departure: Option<(StampNs, Isometry3<f64>)>,
+    to_time: Option<((StampNs, StampNs), Isometry3<f64>)>,
+    to_columns: [Option<ToColumn>; 4],
     next: usize,
 }
 
-impl TransformCache {
-    fn get(&mut self, trajectory: &Trajectory, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
-        if let Some((_, transform)) = self
-            .slots
-            .iter()
-            .flatten()
-            .find(|(key, _)| *key == (from_ns, to_ns))
-        {
+impl<'a> TransformCache<'a> {
+    fn new(trajectory: &'a Trajectory, arrivals: &'a [Isometry3<f64>]) -> Self {
+        Self {
+            trajectory,
+            arrivals,
+            departure: None,
+            to_time: None,
+            to_columns: [None; 4],
+            next: 0,
+        }
+    }
+
+    /// Points measured at `from_ns` into the frame at `to_ns`.
+    fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
+        match self.to_time {
+            Some((key, transform)) if key == (from_ns, to_ns) => transform,
+            _ => {
+                let transform = self.trajectory.pose(to_ns).inverse() * self.departure(from_ns);
+                self.to_time = Some(((from_ns, to_ns), transform));
+                transform
+            }
+        }
+    }
+
+    /// Points measured at `from_ns` into the frame target column `col`
+    /// fired in.
+    fn until_column(&mut self, from_ns: StampNs, col: usize) -> Isometry3<f64> {
+        let key = (from_ns, col);
+        if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
             return *transform;
         }
-        let transform = trajectory.relative(from_ns, to_ns);
-        self.slots[self.next] = Some(((from_ns, to_ns), transform));
-        self.next = (self.next + 1) % self.slots.len();
+        let transform = self.arrivals[col] * self.departure(from_ns);
+        self.to_columns[self.next] = Some((key, transform));
+        self.next = (self.next + 1) % self.to_columns.len();
         transform
+    }
+
+    fn departure(&mut self, from_ns: StampNs) -> Isometry3<f64> {
+        match self.departure {
+            Some((time_ns, pose)) if time_ns == from_ns => pose,
+            _ => {
+                let pose = self.trajectory.pose(from_ns);
+                self.departure = Some((from_ns, pose));
+                pose
+            }
+        }
     }
 }
 
@@ -168,7 +274,6 @@ fn warp_vertex(
     source: &Source,
     target: &Target,
     geometry: &ImageGeometry,
-    trajectory: &Trajectory,
     scan_offset_ns: StampNs,
     cell: usize,
     cache: &mut TransformCache,
@@ -183,7 +288,7 @@ fn warp_vertex(
     // It will be seen again about one scan later; refine with the firing time
     // of the column it lands in (a rolling sweep fires columns at different times).
     let seen_ns = measured_ns + scan_offset_ns;
-    let mut transform = cache.get(trajectory, measured_ns, seen_ns);
+    let mut transform = cache.until(measured_ns, seen_ns);
     let mut moved = transform * point;
     let source_azimuth = source.surfaces.azimuth_rad[cell];
     let col = geometry.col_of(source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y)));
@@ -194,7 +299,7 @@ fn warp_vertex(
         if (column_ns - seen_ns).abs() > scan_offset_ns.abs() / 4 {
             return None;
         }
-        transform = cache.get(trajectory, measured_ns, column_ns);
+        transform = cache.until_column(measured_ns, col);
         moved = transform * point;
     }
     let n = source.surfaces.normal[cell];
@@ -208,7 +313,7 @@ fn warp_vertex(
     Some(Vertex {
         position: moved,
         normal,
-        row: geometry.row_f_at(elevation, moved.coords.norm()),
+        row: geometry.row_f_near(elevation, moved.coords.norm(), Some(cell / geometry.cols)),
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })
@@ -545,11 +650,17 @@ fn rasterize_triangle(
     // the HDL-64E, but misses creases the triangle sees: fused RMSE +23 %
     // on the synthetic `crossing` at 64 x 2048.)
     let unit = normal / normal.norm().max(1e-300);
-    let row_lo = (r_min.floor().max(0.0)) as usize;
-    let row_hi = (r_max.ceil() as usize).min(geometry.rows - 1);
+    // The cells whose coordinates can lie in the bounding box: the box
+    // widened by the target's reach (about half a cell, where the whole
+    // cells around the box hold some three times as many).
+    let (row_reach, col_reach) = (target.reach.0 + REACH_SLACK, target.reach.1 + REACH_SLACK);
+    let row_lo = r_min.floor().max((r_min - row_reach).ceil()).max(0.0) as usize;
+    let row_hi = (r_max.ceil().min((r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
+    let col_lo = c_min.floor().max((c_min - col_reach).ceil()) as i64;
+    let col_hi = c_max.ceil().min((c_max + col_reach).floor()) as i64;
     let cols_i = geometry.cols as i64;
     for row in row_lo..=row_hi {
-        for col_unwrapped in (c_min.floor() as i64)..=(c_max.ceil() as i64) {
+        for col_unwrapped in col_lo..=col_hi {
             let col = wrap_col(col_unwrapped, cols_i);
             let cell = row * geometry.cols + col;
             let direction = target.surfaces.direction[cell];
