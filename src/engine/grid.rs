@@ -46,7 +46,14 @@ impl ImageGeometry {
 
     /// Cell column of an azimuth (nearest bin centre).
     pub fn col_of(&self, azimuth_rad: f64) -> usize {
-        (self.col_f(azimuth_rad) + 0.5) as usize % self.cols
+        // `col_f` is in [0, cols): only the last half column wraps (no
+        // integer division: every vertex of every render).
+        let col = (self.col_f(azimuth_rad) + 0.5) as usize;
+        if col >= self.cols {
+            col - self.cols
+        } else {
+            col
+        }
     }
 
     /// Continuous row of an elevation (lasers on the rotation axis).
@@ -113,6 +120,31 @@ impl ImageGeometry {
         let row_step = (e[e.len() - 1] - e[0]) / (e.len() - 1) as f64;
         let col_step = TAU / self.cols as f64;
         row_step > SPARSE_ROW_RATIO * col_step
+    }
+
+    /// The cells next to `cell`: [`neighbours`](Self::neighbours)`(cell, 1, 1)`
+    /// (the same cells in the same order) from an array instead of the
+    /// general window's iterator chain, as the per-cell passes take them
+    /// for every cell.
+    pub fn neighbours_3x3(&self, cell: usize) -> impl Iterator<Item = usize> + use<> {
+        let cols = self.cols;
+        let (row, col) = (cell / cols, cell % cols);
+        let cols_i = cols as i64;
+        let around = [-1, 0, 1].map(|dc| wrap_col(col as i64 + dc, cols_i));
+        let mut cells = [0usize; 8];
+        let mut count = 0;
+        for (dr, r) in [(-1, row.wrapping_sub(1)), (0, row), (1, row + 1)] {
+            if r >= self.rows {
+                continue;
+            }
+            for (dc, c) in [-1, 0, 1].into_iter().zip(around) {
+                if dr != 0 || dc != 0 {
+                    cells[count] = r * cols + c;
+                    count += 1;
+                }
+            }
+        }
+        cells.into_iter().take(count)
     }
 
     /// The cells around `cell` within `half_rows` beams and `half_cols`
@@ -574,5 +606,23 @@ mod tests {
         }
         assert_eq!(walk_to_partition(n, &at, f64::NAN, 4), 0);
         assert_eq!(bisect_to_partition(n, &at, f64::NAN), 0);
+    }
+
+    #[test]
+    fn the_3x3_neighbours_are_the_windows() {
+        for (rows, cols) in [(1, 1), (1, 5), (2, 1), (2, 2), (3, 3), (4, 7), (64, 2048)] {
+            let geometry = ImageGeometry {
+                rows,
+                cols,
+                beams: BeamTable::uniform(rows, -0.4, 0.03),
+                ring_to_row: None,
+                parallax_rad_m: None,
+            };
+            for cell in (0..rows * cols).step_by(1 + rows * cols / 500) {
+                let expected: Vec<usize> = geometry.neighbours(cell, 1, 1).collect();
+                let fast: Vec<usize> = geometry.neighbours_3x3(cell).collect();
+                assert_eq!(fast, expected, "{rows} x {cols}, cell {cell}");
+            }
+        }
     }
 }

@@ -620,7 +620,7 @@ fn per_cell(
             let row = cell / geometry.cols;
             candidate[cell]
                 && geometry
-                    .neighbours(cell, 1, 1)
+                    .neighbours_3x3(cell)
                     .any(|n| candidate[n] && n / geometry.cols != row)
         })
         .collect();
@@ -647,7 +647,7 @@ fn per_cell(
                 normal[0] * m[0] + normal[1] * m[1] + normal[2] * m[2] > 0.95
             };
             let values = std::iter::once(cell)
-                .chain(geometry.neighbours(cell, 1, 1).filter(|&n| same_surface(n)))
+                .chain(geometry.neighbours_3x3(cell).filter(|&n| same_surface(n)))
                 .filter(|&n| trusted_static(n))
                 .map(|n| pointwise[n]);
             median_3x3(values).unwrap_or(pointwise[cell])
@@ -868,7 +868,7 @@ fn fuse(
         // The median over the moving neighbours: less noise, and an edge cell
         // with a wild value cannot drag it.
         let values = std::iter::once(cell)
-            .chain(geometry.neighbours(cell, 1, 1))
+            .chain(geometry.neighbours_3x3(cell))
             .filter(|&n| moving[n] && raw[n].l_lidar.is_finite() && raw[n].mask == 0)
             .map(|n| raw[n].l_lidar);
         return median_3x3(values).unwrap_or(r.l_lidar);
