@@ -970,7 +970,7 @@ mod tests {
             let values: Vec<f32> = (0..count)
                 .map(|_| {
                     state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    if state % 4 == 0 {
+                    if state.is_multiple_of(4) {
                         specials[(state >> 8) as usize % specials.len()]
                     } else {
                         (state >> 8) as f32 / 1e5 - 80.0
