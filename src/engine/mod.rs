@@ -591,15 +591,23 @@ fn per_cell(
 ) -> CellValues {
     let raw: Vec<Raw> = (0..geometry.cells())
         .into_par_iter()
-        .map(|cell| {
-            let raw = raw_cell(config, current, current_time, rotated, moved, cell);
-            match moved {
-                Some(moved) => {
-                    to_instant(raw, motion, moved.source_time_ns[cell], current_time[cell])
+        // The motion series' positions of the last source and current
+        // times, per worker (neighbouring cells' times are close).
+        .map_init(
+            || [0, 0],
+            |hints, cell| {
+                let raw = raw_cell(config, current, current_time, rotated, moved, cell);
+                match moved {
+                    Some(moved) => to_instant(
+                        raw,
+                        motion,
+                        (moved.source_time_ns[cell], current_time[cell]),
+                        hints,
+                    ),
+                    None => raw,
                 }
-                None => raw,
-            }
-        })
+            },
+        )
         .collect();
     let candidate: Vec<bool> = raw
         .par_iter()
@@ -790,13 +798,21 @@ fn raw_cell(
 /// speed, is that error: removed from both differences, which leaves `D`
 /// unchanged and corrects moving objects for the ego's share of the relative
 /// acceleration.
-fn to_instant(raw: Raw, motion: &PairMotion, source_time_ns: StampNs, time_ns: StampNs) -> Raw {
+/// (`hints`: the series' positions of the last two times asked, for
+/// [`PairMotion::velocity_near`].)
+fn to_instant(
+    raw: Raw,
+    motion: &PairMotion,
+    (source_time_ns, time_ns): (StampNs, StampNs),
+    hints: &mut [usize; 2],
+) -> Raw {
     if !raw.l_ray_ego.is_finite() {
         return raw;
     }
+    let [source_hint, hint] = hints;
     let (Some(before), Some(now)) = (
-        motion.velocity_at(source_time_ns),
-        motion.velocity_at(time_ns),
+        motion.velocity_near(source_time_ns, source_hint),
+        motion.velocity_near(time_ns, hint),
     ) else {
         return raw;
     };
@@ -916,16 +932,19 @@ fn fuse(
 fn ego_looming(scan: &Scan, motion: &PairMotion) -> Vec<f32> {
     (0..scan.points_m.len())
         .into_par_iter()
-        .map(|i| {
-            let offset_s = scan.time_offset_s.as_ref().map_or(0.0, |t| f64::from(t[i]));
-            let t_ns = scan.stamp_ns + (offset_s * 1e9).round() as StampNs;
-            let Some(velocity) = motion.velocity_at(t_ns) else {
-                return f32::NAN;
-            };
-            let p = scan.points_m[i];
-            let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-            (velocity.dot(&p) / p.norm_squared()) as f32
-        })
+        .map_init(
+            || 0,
+            |hint, i| {
+                let offset_s = scan.time_offset_s.as_ref().map_or(0.0, |t| f64::from(t[i]));
+                let t_ns = scan.stamp_ns + (offset_s * 1e9).round() as StampNs;
+                let Some(velocity) = motion.velocity_near(t_ns, hint) else {
+                    return f32::NAN;
+                };
+                let p = scan.points_m[i];
+                let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+                (velocity.dot(&p) / p.norm_squared()) as f32
+            },
+        )
         .collect()
 }
 

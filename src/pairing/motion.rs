@@ -76,6 +76,29 @@ impl TimeSeries {
     /// Value at `stamp_ns`; `None` when no sample is close enough.
     pub fn at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
         let after_index = self.samples.partition_point(|(t, _)| *t <= stamp_ns);
+        self.around(stamp_ns, after_index)
+    }
+
+    /// [`at`](Self::at), finding the samples around `stamp_ns` by walking
+    /// from `*hint` (the last call's, left there for the next) instead of by
+    /// bisection: the same value, in a step or none where calls come in time
+    /// order or close to it (every cell of a pair asks).
+    pub fn at_near(&self, stamp_ns: StampNs, hint: &mut usize) -> Option<Vector3<f64>> {
+        let samples = &self.samples;
+        let mut after_index = (*hint).min(samples.len());
+        while after_index < samples.len() && samples[after_index].0 <= stamp_ns {
+            after_index += 1;
+        }
+        while after_index > 0 && samples[after_index - 1].0 > stamp_ns {
+            after_index -= 1;
+        }
+        *hint = after_index;
+        self.around(stamp_ns, after_index)
+    }
+
+    /// The value at `stamp_ns` from the samples before and after
+    /// `after_index` (the first sample stamped after it).
+    fn around(&self, stamp_ns: StampNs, after_index: usize) -> Option<Vector3<f64>> {
         let before = after_index.checked_sub(1).map(|i| self.samples[i]);
         let after = self.samples.get(after_index).copied();
         match (before, after) {
@@ -154,6 +177,11 @@ pub struct PairMotion {
 impl PairMotion {
     pub fn velocity_at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
         self.velocity.as_ref()?.at(stamp_ns)
+    }
+
+    /// [`velocity_at`](Self::velocity_at) by [`TimeSeries::at_near`].
+    pub fn velocity_near(&self, stamp_ns: StampNs, hint: &mut usize) -> Option<Vector3<f64>> {
+        self.velocity.as_ref()?.at_near(stamp_ns, hint)
     }
 
     pub fn angular_velocity_at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
@@ -267,6 +295,35 @@ mod tests {
     use std::f64::consts::{FRAC_PI_2, PI};
 
     const MS: i64 = 1_000_000;
+
+    #[test]
+    fn walking_from_a_hint_reads_what_bisection_reads() {
+        // Uneven stamps, a repeated one and a gap beyond interpolation.
+        let stamps = [0, 10, 10, 25, 40, 400, 410, 430];
+        let series = TimeSeries::new(
+            stamps
+                .iter()
+                .enumerate()
+                .map(|(k, &t)| (t * MS, Vector3::new(k as f64, -(k as f64), 0.5)))
+                .collect(),
+            0.05,
+        );
+        let mut hint = 0;
+        // Forwards, backwards and jumping, hint carried along.
+        let times: Vec<i64> = (-100..600)
+            .step_by(7)
+            .chain((-100..600).rev().step_by(13))
+            .chain([500, -50, 12, 420, 10, 0, 430, 431])
+            .collect();
+        for t in times {
+            let expected = series.at(t * MS);
+            assert_eq!(series.at_near(t * MS, &mut hint), expected, "at {t} ms");
+        }
+        for start in 0..12 {
+            let mut hint = start;
+            assert_eq!(series.at_near(25 * MS, &mut hint), series.at(25 * MS));
+        }
+    }
 
     fn assert_vec_close(actual: Vector3<f64>, expected: [f64; 3]) {
         let expected = Vector3::from(expected);
