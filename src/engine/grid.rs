@@ -64,17 +64,13 @@ impl ImageGeometry {
     /// Continuous row of a direction seen at `range_m`: between the beams'
     /// elevations at that range, so that a laser off the rotation axis keeps
     /// its own row near the sensor (each return's coordinate then lies
-    /// within its cell, which the renderer relies on).
-    pub fn row_f_at(&self, elevation_rad: f64, range_m: f64) -> f64 {
-        self.row_f_near(elevation_rad, range_m, None)
-    }
-
-    /// [`row_f_at`](Self::row_f_at), searching the beams outward from
-    /// `near_row` (a row at or next to the answer, as a return's own row is
-    /// after the motion between two scans) instead of by bisection: the
-    /// same value where the beams are in elevation order, in a step or two
-    /// instead of six unpredictable ones (every vertex of every render).
-    pub fn row_f_near(&self, elevation_rad: f64, range_m: f64, near_row: Option<usize>) -> f64 {
+    /// within its cell, which the renderer relies on). The beams are
+    /// searched outward from `near_row` (a row at or next to the answer:
+    /// a return's own row, before or after the motion between two scans)
+    /// instead of by bisection, in a step or two instead of six
+    /// unpredictable ones; any row gives the same value, as the beams are in
+    /// elevation order.
+    pub fn row_f_at(&self, elevation_rad: f64, range_m: f64, near_row: usize) -> f64 {
         let beams = &self.beams.elevations_rad;
         let parallax = self
             .parallax_rad_m
@@ -90,10 +86,7 @@ impl ImageGeometry {
             Some(parallax) => beams[k] + parallax[k] * inverse_range,
             None => beams[k],
         };
-        let below = match near_row {
-            Some(row) => walk_to_partition(n, &at, elevation_rad, row),
-            None => bisect_to_partition(n, &at, elevation_rad),
-        };
+        let below = walk_to_partition(n, &at, elevation_rad, near_row);
         let k = below.clamp(1, n - 1) - 1;
         let span = at(k + 1) - at(k);
         if span > 0.0 {
@@ -171,23 +164,8 @@ impl ImageGeometry {
 }
 
 /// How many of the increasing values `at(0..n)` are at or below `value`
-/// (`partition_point`), by bisection.
-fn bisect_to_partition(n: usize, at: &impl Fn(usize) -> f64, value: f64) -> usize {
-    let (mut lo, mut hi) = (0usize, n);
-    while lo < hi {
-        let mid = (lo + hi) / 2;
-        if at(mid) <= value {
-            lo = mid + 1;
-        } else {
-            hi = mid;
-        }
-    }
-    lo
-}
-
-/// [`bisect_to_partition`] by walking from `start`: the same count for
-/// increasing values and a non-NaN `value`, in as many steps as `start` is
-/// away from it.
+/// (`partition_point`; 0 for NaN), by walking from `start`: as many steps
+/// as `start` is away from the answer.
 fn walk_to_partition(n: usize, at: &impl Fn(usize) -> f64, value: f64, start: usize) -> usize {
     if value.is_nan() {
         return 0;
@@ -588,6 +566,20 @@ fn least_squares(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The reference: `partition_point` by bisection.
+    fn bisect_to_partition(n: usize, at: &impl Fn(usize) -> f64, value: f64) -> usize {
+        let (mut lo, mut hi) = (0usize, n);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if at(mid) <= value {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
 
     #[test]
     fn walking_finds_the_partition_bisection_finds() {

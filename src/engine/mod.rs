@@ -524,8 +524,11 @@ fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)>
         .par_iter()
         .zip(&surfaces.azimuth_rad)
         .zip(&surfaces.range_m)
-        .map(|((&elevation_rad, &azimuth_rad), &range_m)| {
-            let row = geometry.row_f_at(elevation_rad, f64::from(range_m));
+        .enumerate()
+        .map(|(cell, ((&elevation_rad, &azimuth_rad), &range_m))| {
+            // A return lies in or next to its own cell's row.
+            let own_row = cell / geometry.cols;
+            let row = geometry.row_f_at(elevation_rad, f64::from(range_m), own_row);
             let col = geometry.col_f(azimuth_rad);
             (row as f32, col as f32)
         })

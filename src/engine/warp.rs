@@ -313,7 +313,7 @@ fn warp_vertex(
     Some(Vertex {
         position: moved,
         normal,
-        row: geometry.row_f_near(elevation, moved.coords.norm(), Some(cell / geometry.cols)),
+        row: geometry.row_f_at(elevation, moved.coords.norm(), cell / geometry.cols),
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })
