@@ -93,7 +93,7 @@ pub struct Rendered {
 struct Vertex {
     position: Point3<f64>,
     /// The source surface's fitted normal, in the target frame (zero where
-    /// none was fitted).
+    /// none was fitted, and on dense sensors, whose triangles have their own).
     normal: Vector3<f64>,
     row: f64,
     col: f64,
@@ -109,6 +109,9 @@ pub fn render(
 ) -> Rendered {
     let cells = geometry.cells();
     let arrivals = arrival_poses(target.column_time_ns, trajectory);
+    // Only a ring's segments take their vertices' normals (`rasterize_ring`);
+    // triangles have their own.
+    let with_normals = geometry.sparse_rows();
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
@@ -124,6 +127,7 @@ pub fn render(
                         scan_offset_ns,
                         row * geometry.cols + col,
                         &mut cache,
+                        with_normals,
                     )
                 })
                 .collect()
@@ -277,6 +281,7 @@ fn warp_vertex(
     scan_offset_ns: StampNs,
     cell: usize,
     cache: &mut TransformCache,
+    with_normal: bool,
 ) -> Option<Vertex> {
     let range = f64::from(source.surfaces.range_m[cell]);
     if !range.is_finite() {
@@ -290,8 +295,10 @@ fn warp_vertex(
     let seen_ns = measured_ns + scan_offset_ns;
     let mut transform = cache.until(measured_ns, seen_ns);
     let mut moved = transform * point;
+    // The moved return's angles: the source return's, turned by the motion.
     let source_azimuth = source.surfaces.azimuth_rad[cell];
-    let col = geometry.col_of(source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y)));
+    let mut azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
+    let col = geometry.col_of(azimuth);
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
         // A return that lands across the seam of the sweep would be compared
@@ -301,12 +308,14 @@ fn warp_vertex(
         }
         transform = cache.until_column(measured_ns, col);
         moved = transform * point;
+        azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
     }
-    let n = source.surfaces.normal[cell];
-    let normal =
-        transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
-    // The moved return's angles: the source return's, turned by the motion.
-    let azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
+    let normal = if with_normal {
+        let n = source.surfaces.normal[cell];
+        transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]))
+    } else {
+        Vector3::zeros()
+    };
     let level = |p: &Point3<f64>| (p.x * p.x + p.y * p.y).sqrt();
     let elevation = source.surfaces.elevation_rad[cell]
         + turn_rad((level(&point), point.z), (level(&moved), moved.z));
