@@ -421,34 +421,41 @@ fn fill_dropouts(
 /// property of the scan alone: computed once with its surfaces, read by
 /// every render of it (two per pair, up to eight more to estimate a motion).
 pub(super) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usize) -> Vec<u8> {
-    (0..rows * cols)
-        .into_par_iter()
-        .map(|cell| {
-            let (row, col) = (cell / cols, cell % cols);
-            let here = surfaces.range_m[cell].is_finite();
-            let right = row * cols + (col + 1) % cols;
-            let mut joins = 0;
-            if here && surfaces.range_m[right].is_finite() && same_surface(surfaces, cell, right) {
-                joins |= JOIN_RIGHT;
-            }
-            if row + 1 < rows {
-                let down = cell + cols;
-                if here && surfaces.range_m[down].is_finite() && same_surface(surfaces, cell, down)
-                {
-                    joins |= JOIN_DOWN;
+    let mut joins = vec![0; rows * cols];
+    joins
+        .par_chunks_mut(cols.max(1))
+        .enumerate()
+        .for_each(|(row, joins_of_row)| {
+            let noise_here = f64::from(surfaces.noise_m_per_row[row]);
+            let noise_down = surfaces
+                .noise_m_per_row
+                .get(row + 1)
+                .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
+            let finite = |cell: usize| surfaces.range_m[cell].is_finite();
+            for (col, joins) in joins_of_row.iter_mut().enumerate() {
+                let cell = row * cols + col;
+                let right = row * cols + if col + 1 == cols { 0 } else { col + 1 };
+                let here = finite(cell);
+                if here && finite(right) && on_one_plane(surfaces, cell, right, noise_here) {
+                    *joins |= JOIN_RIGHT;
                 }
-                // The diagonal does not involve this cell: an empty cell's
-                // neighbours still share the quad's other triangle.
-                if surfaces.range_m[right].is_finite()
-                    && surfaces.range_m[down].is_finite()
-                    && same_surface(surfaces, right, down)
-                {
-                    joins |= JOIN_ANTI;
+                if row + 1 < rows {
+                    let down = cell + cols;
+                    if here && finite(down) && on_one_plane(surfaces, cell, down, noise_down) {
+                        *joins |= JOIN_DOWN;
+                    }
+                    // The diagonal does not involve this cell: an empty cell's
+                    // neighbours still share the quad's other triangle.
+                    if finite(right)
+                        && finite(down)
+                        && on_one_plane(surfaces, right, down, noise_down)
+                    {
+                        *joins |= JOIN_ANTI;
+                    }
                 }
             }
-            joins
-        })
-        .collect()
+        });
+    joins
 }
 
 pub(super) const JOIN_RIGHT: u8 = 1;
@@ -471,13 +478,18 @@ fn on_one_surface(source: &Source, proxy: &[u32], (x, y): (usize, usize), joined
 /// Whether two neighbouring source cells lie on one surface (so a triangle
 /// between them is real and not a bridge across an occlusion).
 fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
+    on_one_plane(s, a, b, s.noise_m(a).max(s.noise_m(b)))
+}
+
+/// [`same_surface`] with the larger of the two cells' range noise given
+/// (metres): the mesh's table takes it per row, not per cell.
+fn on_one_plane(s: &Surfaces, a: usize, b: usize, noise_m: f64) -> bool {
     let point = |c: usize| {
         let d = s.direction[c];
         Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * f64::from(s.range_m[c])
     };
     let (pa, pb) = (point(a), point(b));
     let gap = pb - pa;
-    let noise_m = s.noise_m(a).max(s.noise_m(b));
     let tolerance = 4.0 * noise_m + 0.05 * gap.norm();
     let off_plane = |c: usize, other: &Vector3<f64>| {
         let n = s.normal[c];
