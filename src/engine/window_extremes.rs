@@ -11,9 +11,11 @@ use rayon::prelude::*;
 /// sweep), for a few half widths.
 pub(super) struct RowExtremes {
     cols: usize,
-    /// The half widths held, and per half width `[smallest, largest]` per
-    /// cell (row-major), metres; NaN where the window holds no return.
-    by_half_cols: Vec<(usize, Vec<[f64; 2]>)>,
+    /// The half widths held, ascending.
+    half_widths: Vec<usize>,
+    /// Per row, per half width held, per column: `[smallest, largest]`,
+    /// metres; NaN where the window holds no return.
+    extremes: Vec<[f64; 2]>,
 }
 
 impl RowExtremes {
@@ -27,74 +29,78 @@ impl RowExtremes {
             .collect();
         wanted.sort_unstable();
         wanted.dedup();
-        let rows = ranges.len().checked_div(cols).unwrap_or(0);
-        let per_row: Vec<Vec<Vec<[f64; 2]>>> = (0..rows)
-            .into_par_iter()
-            .map(|row| row_extremes(&ranges[row * cols..(row + 1) * cols], &wanted))
-            .collect();
-        let by_half_cols = wanted
-            .iter()
-            .enumerate()
-            .map(|(k, &half)| (half, per_row.iter().flat_map(|r| &r[k]).copied().collect()))
-            .collect();
-        Self { cols, by_half_cols }
+        let per_row = wanted.len() * cols;
+        let mut extremes = vec![[f64::NAN; 2]; ranges.len() / cols.max(1) * per_row];
+        if per_row > 0 {
+            extremes
+                .par_chunks_mut(per_row)
+                .zip(ranges.par_chunks(cols))
+                .for_each(|(out, row)| row_extremes(row, &wanted, out));
+        }
+        Self {
+            cols,
+            half_widths: wanted,
+            extremes,
+        }
     }
 
     /// `[smallest, largest]` range of `row`'s returns in columns `col -
     /// half_cols ..= col + half_cols`; None when that half width is not held
     /// (or the window is wider than the image).
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<[f64; 2]> {
-        let (_, extremes) = self.by_half_cols.iter().find(|(h, _)| *h == half_cols)?;
-        extremes.get(row * self.cols + col).copied()
+        let held = self.half_widths.iter().position(|&h| h == half_cols)?;
+        let per_row = self.half_widths.len() * self.cols;
+        self.extremes
+            .get(row * per_row + held * self.cols + col)
+            .copied()
     }
 }
 
 /// One row's extremes for each of `wanted` (ascending half widths, each
-/// window narrower than the row). A window of half width `h` is the union
-/// of one of half width `a` centred on the column and two shifted by `h -
-/// a` either way, which covers it when `h <= 3 a + 1`: so each width comes
-/// from the widest already built, widened first where it is too narrow (a
-/// few passes over the row in all, whatever the widths).
-fn row_extremes(ranges: &[f64], wanted: &[usize]) -> Vec<Vec<[f64; 2]>> {
-    let mut built = (0, ranges.iter().map(|&r| [r, r]).collect::<Vec<_>>());
-    let mut out = Vec::with_capacity(wanted.len());
-    for &half in wanted {
-        while 3 * built.0 + 1 < half {
-            let widest = 3 * built.0 + 1;
-            built = (widest, widened(&built.1, widest - built.0));
+/// window narrower than the row), into `out` (one row's worth per width).
+/// A window of half width `h` is the union of one of half width `a`
+/// centred on the column and two shifted by `h - a` either way, which
+/// covers it when `h <= 3 a + 1`: so each width comes from the widest
+/// already built, widened first where it is too narrow (a few passes over
+/// the row in all, whatever the widths).
+fn row_extremes(ranges: &[f64], wanted: &[usize], out: &mut [[f64; 2]]) {
+    let cols = ranges.len();
+    let mut built: Vec<[f64; 2]> = ranges.iter().map(|&r| [r, r]).collect();
+    let mut built_half = 0;
+    let mut next = vec![[f64::NAN; 2]; cols];
+    for (&half, out) in wanted.iter().zip(out.chunks_mut(cols)) {
+        while built_half != half {
+            let widest = (3 * built_half + 1).min(half);
+            widen(&built, widest - built_half, &mut next);
+            std::mem::swap(&mut built, &mut next);
+            built_half = widest;
         }
-        if half != built.0 {
-            built = (half, widened(&built.1, half - built.0));
-        }
-        out.push(built.1.clone());
+        out.copy_from_slice(&built);
     }
-    out
 }
 
-/// Per column, the extremes of `extremes` at the column and at `shift`
-/// columns either side (less than the row's width), wrapping around the
-/// sweep. `f64::min` and `max` pass over NaN (empty cells).
-fn widened(extremes: &[[f64; 2]], shift: usize) -> Vec<[f64; 2]> {
+/// Per column, into `out`, the extremes of `extremes` at the column and at
+/// `shift` columns either side (less than the row's width), wrapping around
+/// the sweep. `f64::min` and `max` pass over NaN (empty cells).
+fn widen(extremes: &[[f64; 2]], shift: usize, out: &mut [[f64; 2]]) {
     let cols = extremes.len();
-    (0..cols)
-        .map(|col| {
-            let before = extremes[if col >= shift {
-                col - shift
-            } else {
-                col + cols - shift
-            }];
-            let after = extremes[if col + shift < cols {
-                col + shift
-            } else {
-                col + shift - cols
-            }];
-            let own = extremes[col];
-            [
-                own[0].min(before[0]).min(after[0]),
-                own[1].max(before[1]).max(after[1]),
-            ]
-        })
-        .collect()
+    for (col, out) in out.iter_mut().enumerate() {
+        let before = extremes[if col >= shift {
+            col - shift
+        } else {
+            col + cols - shift
+        }];
+        let after = extremes[if col + shift < cols {
+            col + shift
+        } else {
+            col + shift - cols
+        }];
+        let own = extremes[col];
+        *out = [
+            own[0].min(before[0]).min(after[0]),
+            own[1].max(before[1]).max(after[1]),
+        ];
+    }
 }
 
 #[cfg(test)]

@@ -109,26 +109,20 @@ pub(super) struct RowSums {
 impl RowSums {
     /// Sums of `points` (one per cell, row-major; NaN for an empty cell).
     pub fn new(points: &[Vector3<f64>], cols: usize) -> Self {
-        let rows = points.len() / cols.max(1);
-        let per_row: Vec<Vec<Moments>> = (0..rows)
-            .into_par_iter()
-            .map(|row| {
-                let mut running = Vec::with_capacity(cols + 1);
+        let mut running = vec![Moments::default(); points.len() / cols.max(1) * (cols + 1)];
+        running
+            .par_chunks_mut(cols + 1)
+            .zip(points.par_chunks(cols.max(1)))
+            .for_each(|(running, row)| {
                 let mut total = Moments::default();
-                running.push(total);
-                for p in &points[row * cols..(row + 1) * cols] {
+                for (sum, p) in running[1..].iter_mut().zip(row) {
                     if !p.x.is_nan() {
                         total = total.plus(&Moments::of_point(p));
                     }
-                    running.push(total);
+                    *sum = total;
                 }
-                running
-            })
-            .collect();
-        Self {
-            cols,
-            running: per_row.concat(),
-        }
+            });
+        Self { cols, running }
     }
 
     /// Moments of `row`'s returns in columns `col - half_cols ..= col +
