@@ -26,6 +26,7 @@ mod surface;
 pub mod threat;
 pub mod trajectory;
 mod warp;
+mod window_extremes;
 mod window_sums;
 
 use nalgebra::Vector3;

@@ -7,7 +7,8 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use super::grid::{ImageGeometry, NO_POINT, RangeImage};
-use super::window_sums::{RowSums, column_spans};
+use super::window_extremes::RowExtremes;
+use super::window_sums::{Moments, RowSums, column_spans};
 use crate::messages::Scan;
 
 /// Per cell of one image.
@@ -101,12 +102,15 @@ fn noise_per_row(returns: &Returns, geometry: &ImageGeometry, params: SurfacePar
             let mut residuals: Vec<f32> = (0..geometry.cols)
                 .step_by(NOISE_STRIDE)
                 .filter_map(|col| {
+                    let (cell, window) = (row * geometry.cols + col, (1, params.half_cols));
+                    let gated = gated_window(returns, geometry, cell, window);
                     let (fit, _) = fit_window(
                         returns,
                         geometry,
-                        row * geometry.cols + col,
+                        cell,
                         loose,
-                        (1, params.half_cols),
+                        window,
+                        gated.as_ref(),
                         scratch,
                     );
                     (fit.support >= 6 && !fit.edge && fit.residual_m.is_finite())
@@ -216,7 +220,21 @@ impl Surfaces {
         params: SurfaceParams,
         range_bias_m_per_row: Vec<f32>,
     ) -> Self {
-        let returns = Returns::new(scan, image, geometry.cols, &range_bias_m_per_row);
+        // The windows of `fit_cell`'s growths (dense sensors only).
+        let window_half_cols: Vec<usize> = if params.sparse_rows {
+            Vec::new()
+        } else {
+            (1..=MAX_GROWTH)
+                .map(|grow| grow * params.half_cols)
+                .collect()
+        };
+        let returns = Returns::new(
+            scan,
+            image,
+            geometry.cols,
+            &range_bias_m_per_row,
+            &window_half_cols,
+        );
         let noise_m_per_row = shrunk_to_sensor(if params.sparse_rows {
             row_noise(image, geometry, params.range_noise_m)
         } else {
@@ -309,10 +327,20 @@ struct Returns<'a> {
     ranges: Vec<f64>,
     /// Running sums of `points` along each row, for the windows' scatter.
     sums: RowSums,
+    /// Extremes of `ranges` along each row, for the windows' range gate.
+    extremes: RowExtremes,
 }
 
 impl<'a> Returns<'a> {
-    fn new(scan: &Scan, image: &'a RangeImage, cols: usize, range_bias_m: &[f32]) -> Self {
+    /// The returns, with the range extremes of windows `window_half_cols`
+    /// wide on each side.
+    fn new(
+        scan: &Scan,
+        image: &'a RangeImage,
+        cols: usize,
+        range_bias_m: &[f32],
+        window_half_cols: &[usize],
+    ) -> Self {
         let points: Vec<Vector3<f64>> = image
             .point
             .par_iter()
@@ -332,13 +360,25 @@ impl<'a> Returns<'a> {
                 }
             })
             .collect();
-        let ranges = points.iter().map(|p| p.norm()).collect();
+        Self::of_points(image, points, cols, window_half_cols)
+    }
+
+    /// The returns `points` (one per cell of `image`; NaN empty).
+    fn of_points(
+        image: &'a RangeImage,
+        points: Vec<Vector3<f64>>,
+        cols: usize,
+        window_half_cols: &[usize],
+    ) -> Self {
+        let ranges: Vec<f64> = points.iter().map(|p| p.norm()).collect();
         let sums = RowSums::new(&points, cols);
+        let extremes = RowExtremes::new(&ranges, cols, window_half_cols);
         Self {
             image,
             points,
             ranges,
             sums,
+            extremes,
         }
     }
 
@@ -371,13 +411,19 @@ fn fit_cell(
         return fit_ring_cell(returns, geometry, cell, params, scratch);
     }
     let mut best = EMPTY;
-    for grow in 1..=3 {
+    for grow in 1..=MAX_GROWTH {
+        let window = (grow, grow * params.half_cols);
+        let gated = gated_window(returns, geometry, cell, window);
+        if grow < MAX_GROWTH && gated.as_ref().is_some_and(|g| too_narrow(g, params)) {
+            continue;
+        }
         let (surface, spread) = fit_window(
             returns,
             geometry,
             cell,
             params,
-            (grow, grow * params.half_cols),
+            window,
+            gated.as_ref(),
             scratch,
         );
         best = surface;
@@ -388,23 +434,43 @@ fn fit_cell(
     best
 }
 
+/// Growths of a cell's window at most: `2 grow + 1` beams.
+const MAX_GROWTH: usize = 3;
+
 /// One fit over a window of `2 half_rows + 1` beams by `2 half_cols + 1`
-/// columns (`(half_rows, half_cols)`); also returns the in-plane spread of the points fitted.
+/// columns (`(half_rows, half_cols)`), `gated` its `gated_window`; also
+/// returns the in-plane spread of the points fitted.
 fn fit_window(
     returns: &Returns,
     geometry: &ImageGeometry,
     cell: usize,
     params: SurfaceParams,
     window: (usize, usize),
+    gated: Option<&GatedWindow>,
     scratch: &mut Scratch,
 ) -> (CellSurface, Option<f64>) {
     let Some(center) = returns.point(cell) else {
         return (EMPTY, None);
     };
-    if let Some(fitted) = fit_whole_window(returns, geometry, cell, &center, params, window) {
-        return fitted;
-    }
-    let (half_rows, half_cols) = window;
+    gated
+        .and_then(|gated| fit_whole_window(returns, geometry.cols, &center, params, gated))
+        .unwrap_or_else(|| {
+            fit_gated_points(returns, geometry, cell, &center, params, window, scratch)
+        })
+}
+
+/// [`fit_window`]'s fit over the window's returns one by one: those within
+/// a loose range gate, then those on the plane fitted to them.
+fn fit_gated_points(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    center: &Vector3<f64>,
+    params: SurfaceParams,
+    (half_rows, half_cols): (usize, usize),
+    scratch: &mut Scratch,
+) -> (CellSurface, Option<f64>) {
+    let center = *center;
     let raw = raw_surface(&center);
     let (range, direction) = (center.norm(), center / center.norm());
     // Candidates: neighbours not absurdly far in range (a loose gate; the plane decides).
@@ -478,51 +544,29 @@ fn fit_window(
     (surface, Some(spread))
 }
 
-/// [`fit_window`]'s fit where every return of the window passes the range
-/// gate and lies on the plane fitted to them all (most windows): the
-/// window's scatter from the running row sums, and one pass over its
-/// ranges and, unless the plane's scatter alone shows every return within
-/// tolerance, its points. None where the window needs the full fit (a
-/// return beyond the gate or off the plane, fewer than four returns, no
-/// plane, or a window wider than the image).
+/// [`fit_window`]'s fit of a window whose returns all pass the range gate
+/// (`gated_window`), where they all lie on the plane fitted to them (most
+/// windows): the plane from the window's moments, and the returns'
+/// distances to it from them too (`window_on_plane`). None where the window
+/// needs the full fit (a return off the plane, fewer than four returns, or
+/// no plane).
 fn fit_whole_window(
     returns: &Returns,
-    geometry: &ImageGeometry,
-    cell: usize,
+    cols: usize,
     center: &Vector3<f64>,
     params: SurfaceParams,
-    (half_rows, half_cols): (usize, usize),
+    window: &GatedWindow,
 ) -> Option<(CellSurface, Option<f64>)> {
-    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
-    let window_rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
     let range = center.norm();
-    let gate_m = 0.3 * range + 0.5;
-    let mut moments = super::window_sums::Moments::default();
-    for r in window_rows.clone() {
-        moments = moments.plus(&returns.sums.window(r, col, half_cols)?);
-        let beyond_gate = window_cells(r * cols, col, half_cols, cols)
-            .flat_map(|span| &returns.ranges[span])
-            .any(|&neighbour| (neighbour - range).abs() > gate_m);
-        if beyond_gate {
-            return None;
-        }
-    }
+    let moments = window.total;
     if moments.count < 4.0 {
         return None;
     }
     let (centroid, covariance) = moments.scatter()?;
     let plane = plane_of_scatter(moments.count, centroid, &covariance)?;
     let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
-    // The squared distances to the plane sum to its smallest scatter, so
-    // none exceeds the tolerance when that sum does not.
-    if plane.smallest > WHOLE_WINDOW_MARGIN * tolerance * tolerance {
-        let off_plane = window_rows
-            .flat_map(|r| window_cells(r * cols, col, half_cols, cols))
-            .flat_map(|span| &returns.points[span])
-            .any(|p| !p.x.is_nan() && (p - plane.centroid).dot(&plane.normal).abs() > tolerance);
-        if off_plane {
-            return None;
-        }
+    if !window_on_plane(returns, cols, window, &plane, tolerance) {
+        return None;
     }
     let direction = center / range;
     let surface = CellSurface {
@@ -535,9 +579,140 @@ fn fit_whole_window(
     Some((surface, Some(plane.spread)))
 }
 
-/// Below this fraction of the squared tolerance, a plane's smallest scatter
-/// shows every return on it without looking (a margin for the rounding of
-/// the running sums).
+/// The moments of a window (`(half_rows, half_cols)` about a cell) whose
+/// returns all lie within the cell's range gate: from each row's range
+/// extremes and running sums.
+struct GatedWindow {
+    /// Moments of all the window's returns.
+    total: Moments,
+    first_row: usize,
+    last_row: usize,
+    col: usize,
+    half_cols: usize,
+    /// The cell's range, metres.
+    range_m: f64,
+}
+
+/// None where the cell is empty, a return is beyond the gate, or the window
+/// is wider than the image.
+fn gated_window(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    (half_rows, half_cols): (usize, usize),
+) -> Option<GatedWindow> {
+    let range_m = returns.point(cell)?.norm();
+    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    let gate_m = 0.3 * range_m + 0.5;
+    let mut window = GatedWindow {
+        range_m,
+        total: Moments::default(),
+        first_row: row.saturating_sub(half_rows),
+        last_row: (row + half_rows).min(geometry.rows - 1),
+        col,
+        half_cols,
+    };
+    for r in window.first_row..=window.last_row {
+        let [nearest_m, farthest_m] = returns.extremes.window(r, col, half_cols)?;
+        if range_m - nearest_m > gate_m || farthest_m - range_m > gate_m {
+            return None;
+        }
+        window.total = window.total.plus(&returns.sums.window(r, col, half_cols)?);
+    }
+    Some(window)
+}
+
+/// Whether [`fit_window`] would fit the window's returns whole
+/// (`fit_whole_window`) to a plane with an in-plane spread below 2 noise
+/// sigmas, so that [`fit_cell`] drops the fit for a wider window. From the
+/// window's scatter without solving for its plane: the number of its
+/// eigenvalues below a bound is the number of sign changes along the
+/// leading principal minors of the scatter less the bound (Sylvester's law
+/// of inertia), so the middle eigenvalue below `count (2 sigma)^2` and the
+/// smallest below the squared tolerance (every return on the plane) are a
+/// few products each. False where unsure: the fit decides.
+fn too_narrow(gated: &GatedWindow, params: SurfaceParams) -> bool {
+    let count = gated.total.count;
+    let Some((_, scatter)) = gated.total.scatter().filter(|_| count >= 4.0) else {
+        return false;
+    };
+    let narrow_m2 = count * (2.0 * params.range_noise_m).powi(2);
+    let tolerance = 4.0 * params.range_noise_m + 0.003 * gated.range_m;
+    let on_plane_m2 = WHOLE_WINDOW_MARGIN * tolerance * tolerance;
+    let (trace, minors) = (scatter.trace(), principal_minors(&scatter));
+    // The sum of the principal minors is at most three times the product
+    // of the two larger eigenvalues, and the trace at least the larger: so
+    // minors of `3e-3 trace^2` or more surely make a plane for
+    // `plane_of_scatter` (the middle eigenvalue at least 1e-3 of the
+    // largest), and minors of `3 narrow trace` or more surely a middle
+    // eigenvalue above `narrow` (most windows, without a determinant).
+    let plane = trace.is_finite() && trace > 0.0 && minors >= 3e-3 * trace * trace;
+    plane
+        && minors < 3.0 * narrow_m2 * trace
+        && eigenvalues_below(&scatter, narrow_m2).is_some_and(|n| n >= 2)
+        && eigenvalues_below(&scatter, on_plane_m2).is_some_and(|n| n >= 1)
+}
+
+/// Sum of the 2x2 principal minors of a symmetric matrix.
+fn principal_minors(a: &Matrix3<f64>) -> f64 {
+    a[(0, 0)] * a[(1, 1)] - a[(0, 1)].powi(2) + a[(0, 0)] * a[(2, 2)] - a[(0, 2)].powi(2)
+        + a[(1, 1)] * a[(2, 2)]
+        - a[(1, 2)].powi(2)
+}
+
+/// How many eigenvalues of a symmetric matrix lie below `bound`: the sign
+/// changes along 1 and the leading principal minors of `a - bound I`; None
+/// where a minor is zero (or not finite), which the rule does not cover.
+fn eigenvalues_below(a: &Matrix3<f64>, bound: f64) -> Option<usize> {
+    let b = a - Matrix3::identity() * bound;
+    let minors = [
+        1.0,
+        b[(0, 0)],
+        b[(0, 0)] * b[(1, 1)] - b[(0, 1)] * b[(1, 0)],
+        b.determinant(),
+    ];
+    if minors[1..3].contains(&0.0) || !minors.iter().all(|m| m.is_finite()) {
+        return None;
+    }
+    Some(
+        minors
+            .windows(2)
+            .filter(|pair| (pair[0] < 0.0) != (pair[1] < 0.0))
+            .count(),
+    )
+}
+
+/// Every return of the window lies within `tolerance` of `plane`. The squared distances sum to the plane's smallest scatter over
+/// the window, and to a quadratic of each row's moments over the row: no
+/// return exceeds the tolerance where that sum does not, so only the
+/// returns of a row whose sum does are looked at (on noisy data the
+/// window's sum, `(n - 3) sigma^2`, mostly does; a row's mostly not).
+fn window_on_plane(
+    returns: &Returns,
+    cols: usize,
+    window: &GatedWindow,
+    plane: &Plane,
+    tolerance: f64,
+) -> bool {
+    let limit = WHOLE_WINDOW_MARGIN * tolerance * tolerance;
+    if plane.smallest <= limit {
+        return true;
+    }
+    let offset = plane.centroid.dot(&plane.normal);
+    let mut rows = (window.first_row..=window.last_row).filter(|&r| {
+        let of_row = returns.sums.window(r, window.col, window.half_cols);
+        of_row.is_none_or(|moments| moments.squared_distances(&plane.normal, offset) > limit)
+    });
+    !rows.any(|r| {
+        window_cells(r * cols, window.col, window.half_cols, cols)
+            .flat_map(|span| &returns.points[span])
+            .any(|p| !p.x.is_nan() && (p - plane.centroid).dot(&plane.normal).abs() > tolerance)
+    })
+}
+
+/// Below this fraction of the squared tolerance, a sum of squared distances
+/// to a plane shows every return in it on the plane without looking (a
+/// margin for the rounding of the running sums).
 const WHOLE_WINDOW_MARGIN: f64 = 0.999;
 
 /// The cells of the row starting at cell `row_start` in the window's
@@ -810,10 +985,7 @@ fn plane_of_scatter(
 /// form's acos and cos were a tenth of the engine's time).
 fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)> {
     let trace = a.trace();
-    let minors = a[(0, 0)] * a[(1, 1)] - a[(0, 1)].powi(2) + a[(0, 0)] * a[(2, 2)]
-        - a[(0, 2)].powi(2)
-        + a[(1, 1)] * a[(2, 2)]
-        - a[(1, 2)].powi(2);
+    let minors = principal_minors(a);
     let det = a.determinant();
     if !(trace.is_finite() && minors.is_finite() && det.is_finite()) {
         return None;
@@ -898,24 +1070,37 @@ mod tests {
         assert!(fit_plane(&points).is_none());
     }
 
-    #[test]
-    fn eigenvalues_match_nalgebras_on_scatter_matrices() {
-        // Scatter matrices of windows on planes (one small eigenvalue), of
-        // isotropic clouds and of lines, against nalgebra's iterative solver.
+    /// Uniform numbers in [-0.5, 0.5), the same sequence every run.
+    fn uniform_numbers() -> impl FnMut() -> f64 {
         let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = move || {
+        move || {
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        for case in 0..300 {
-            let thickness = [1e-4, 0.02, 1.0][case % 3];
-            let width = if case % 7 == 0 { 1e-6 } else { 0.3 };
-            let points: Vec<Vector3<f64>> = (0..15)
-                .map(|_| Vector3::new(uniform(), uniform() * width, uniform() * thickness))
-                .collect();
-            let (_, covariance) = scatter(&points);
+        }
+    }
+
+    /// Scatter matrices of windows on planes (one small eigenvalue), of
+    /// isotropic clouds and of lines.
+    fn scatter_matrices() -> Vec<Matrix3<f64>> {
+        let mut uniform = uniform_numbers();
+        (0..300)
+            .map(|case| {
+                let thickness = [1e-4, 0.02, 1.0][case % 3];
+                let width = if case % 7 == 0 { 1e-6 } else { 0.3 };
+                let points: Vec<Vector3<f64>> = (0..15)
+                    .map(|_| Vector3::new(uniform(), uniform() * width, uniform() * thickness))
+                    .collect();
+                scatter(&points).1
+            })
+            .collect()
+    }
+
+    #[test]
+    fn eigenvalues_match_nalgebras_on_scatter_matrices() {
+        // Against nalgebra's iterative solver.
+        for (case, covariance) in scatter_matrices().into_iter().enumerate() {
             let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
             let mut expected: Vec<f64> = covariance
                 .symmetric_eigen()
@@ -932,6 +1117,147 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn eigenvalues_below_a_bound_are_counted_from_the_minors() {
+        for (case, covariance) in scatter_matrices().into_iter().enumerate() {
+            let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
+            // Bounds between and beyond the eigenvalues, clear of them.
+            let bounds = [0.5 * a - 1.0, 0.5 * (a + b), 0.5 * (b + c), 2.0 * c + 1.0];
+            for (expected, bound) in bounds.into_iter().enumerate() {
+                let clear = [a, b, c].iter().all(|e| (e - bound).abs() > 1e-6 * c);
+                if clear {
+                    assert_eq!(
+                        eigenvalues_below(&covariance, bound),
+                        Some(expected),
+                        "{case}: {bound} against {a} {b} {c}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The returns of a `rows x cols` image of a noisy plane 10 m ahead,
+    /// with one return `off_plane_m` in front of it.
+    fn noisy_plane(rows: usize, cols: usize, noise_m: f64, off_plane_m: f64) -> Vec<Vector3<f64>> {
+        let mut uniform = uniform_numbers();
+        (0..rows * cols)
+            .map(|cell| {
+                let (row, col) = ((cell / cols) as f64, (cell % cols) as f64);
+                let depth = 10.0 + 0.05 * col + noise_m * uniform();
+                let depth = if cell == 2 * cols + 5 {
+                    depth - off_plane_m
+                } else {
+                    depth
+                };
+                Vector3::new(depth, 0.03 * col, 0.07 * row - 0.5)
+            })
+            .collect()
+    }
+
+    /// A dense image's geometry, parameters and (unused) gridded scan.
+    fn dense_image(
+        rows: usize,
+        cols: usize,
+        noise_m: f64,
+    ) -> (ImageGeometry, SurfaceParams, RangeImage) {
+        let geometry = ImageGeometry {
+            rows,
+            cols,
+            beams: super::super::beams::BeamTable::uniform(rows, -0.1, 0.1),
+            ring_to_row: None,
+            parallax_rad_m: None,
+        };
+        let params = SurfaceParams {
+            range_noise_m: noise_m,
+            half_cols: 2,
+            sparse_rows: false,
+            ground_z_m: f64::NEG_INFINITY,
+        };
+        let image = RangeImage {
+            range_m: Vec::new(),
+            point: Vec::new(),
+            point_cell: Vec::new(),
+            point_surface: Vec::new(),
+        };
+        (geometry, params, image)
+    }
+
+    #[test]
+    fn whole_window_fits_match_fits_point_by_point() {
+        let (rows, cols) = (5, 24);
+        let (geometry, params, image) = dense_image(rows, cols, 0.002);
+        // Noise enough for the windows' summed squared distances to exceed
+        // the tolerance (rows are then looked at one by one), and a return
+        // off the plane by more than the tolerance.
+        let points = noisy_plane(rows, cols, 0.03, 0.2);
+        let returns = Returns::of_points(&image, points, cols, &[2, 4]);
+        let mut scratch = Scratch::default();
+        let (mut whole, mut off) = (0, 0);
+        for cell in 0..rows * cols {
+            for window in [(1, 2), (2, 4)] {
+                let center = returns.point(cell).unwrap();
+                let by_points = fit_gated_points(
+                    &returns,
+                    &geometry,
+                    cell,
+                    &center,
+                    params,
+                    window,
+                    &mut scratch,
+                );
+                let gated = gated_window(&returns, &geometry, cell, window).unwrap();
+                let Some((fit, spread)) = fit_whole_window(&returns, cols, &center, params, &gated)
+                else {
+                    off += 1;
+                    assert!(by_points.0.edge, "cell {cell} {window:?}: an edge");
+                    continue;
+                };
+                whole += 1;
+                assert!(!by_points.0.edge, "cell {cell} {window:?}: no edge");
+                assert!((fit.range_m - by_points.0.range_m).abs() < 1e-5);
+                assert!((spread.unwrap() - by_points.1.unwrap()).abs() < 1e-6);
+                let dot: f32 = (0..3).map(|k| fit.normal[k] * by_points.0.normal[k]).sum();
+                assert!(dot > 1.0 - 1e-6, "cell {cell} {window:?}: normals {dot}");
+            }
+        }
+        assert!(
+            whole > 0 && off > 0,
+            "{whole} whole windows, {off} off the plane"
+        );
+    }
+
+    #[test]
+    fn windows_found_too_narrow_fit_with_a_spread_below_two_sigmas() {
+        let (rows, cols) = (5, 24);
+        let mut narrow = 0;
+        for noise_m in [0.005, 0.03] {
+            let (geometry, params, image) = dense_image(rows, cols, noise_m);
+            let points = noisy_plane(rows, cols, noise_m, 0.5);
+            let returns = Returns::of_points(&image, points, cols, &[2, 4]);
+            let mut scratch = Scratch::default();
+            for cell in 0..rows * cols {
+                for window in [(1, 2), (2, 4)] {
+                    let gated = gated_window(&returns, &geometry, cell, window);
+                    let (fit, spread) = fit_window(
+                        &returns,
+                        &geometry,
+                        cell,
+                        params,
+                        window,
+                        gated.as_ref(),
+                        &mut scratch,
+                    );
+                    if gated.is_some_and(|g| too_narrow(&g, params)) {
+                        narrow += 1;
+                        let wide = spread.is_none_or(|s| s >= 2.0 * noise_m);
+                        assert!(!wide && !fit.edge, "cell {cell} {window:?}: {spread:?}");
+                    }
+                }
+            }
+        }
+        assert!(narrow > 0);
     }
 
     #[test]

@@ -61,6 +61,19 @@ impl Moments {
         out
     }
 
+    /// Sum of the squared distances of the returns to the plane of unit
+    /// `normal` at `offset` from the origin (`p . normal = offset`), metres
+    /// squared: from the moments, without the returns.
+    pub fn squared_distances(&self, normal: &Vector3<f64>, offset: f64) -> f64 {
+        let [xx, xy, xz, yy, yz, zz] = self.products;
+        let (x, y, z) = (normal.x, normal.y, normal.z);
+        // sum (p . n)^2, sum p . n: the products and sums projected on n.
+        let along_squared =
+            xx * x * x + yy * y * y + zz * z * z + 2.0 * (xy * x * y + xz * x * z + yz * y * z);
+        let along = self.sum[0] * x + self.sum[1] * y + self.sum[2] * z;
+        along_squared - 2.0 * offset * along + self.count * offset * offset
+    }
+
     /// Centroid and scatter matrix (sum of outer products about it); None
     /// for no returns.
     pub fn scatter(&self) -> Option<(Vector3<f64>, Matrix3<f64>)> {
@@ -96,26 +109,20 @@ pub(super) struct RowSums {
 impl RowSums {
     /// Sums of `points` (one per cell, row-major; NaN for an empty cell).
     pub fn new(points: &[Vector3<f64>], cols: usize) -> Self {
-        let rows = points.len() / cols.max(1);
-        let per_row: Vec<Vec<Moments>> = (0..rows)
-            .into_par_iter()
-            .map(|row| {
-                let mut running = Vec::with_capacity(cols + 1);
+        let mut running = vec![Moments::default(); points.len() / cols.max(1) * (cols + 1)];
+        running
+            .par_chunks_mut(cols + 1)
+            .zip(points.par_chunks(cols.max(1)))
+            .for_each(|(running, row)| {
                 let mut total = Moments::default();
-                running.push(total);
-                for p in &points[row * cols..(row + 1) * cols] {
+                for (sum, p) in running[1..].iter_mut().zip(row) {
                     if !p.x.is_nan() {
                         total = total.plus(&Moments::of_point(p));
                     }
-                    running.push(total);
+                    *sum = total;
                 }
-                running
-            })
-            .collect();
-        Self {
-            cols,
-            running: per_row.concat(),
-        }
+            });
+        Self { cols, running }
     }
 
     /// Moments of `row`'s returns in columns `col - half_cols ..= col +
@@ -123,6 +130,11 @@ impl RowSums {
     /// than the image.
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<Moments> {
         let base = row * (self.cols + 1);
+        if col >= half_cols && col + half_cols < self.cols {
+            // Most windows: one span, the same sums as below.
+            let to = self.running.get(base + col + half_cols + 1)?;
+            return Some(to.minus(self.running.get(base + col - half_cols)?));
+        }
         let mut total = Moments::default();
         for span in column_spans(col, half_cols, self.cols)? {
             let to = self.running.get(base + span.end)?;
@@ -200,8 +212,8 @@ mod tests {
         assert!(sums.window(0, 0, 8).is_none(), "wider than the image");
     }
 
-    #[test]
-    fn the_scatter_of_moments_is_the_centred_scatter() {
+    /// Four returns near a plane 20 m ahead, and their moments.
+    fn four_returns() -> ([Vector3<f64>; 4], Moments) {
         let points = [
             Vector3::new(20.0, 1.0, -1.7),
             Vector3::new(20.1, 1.2, -1.69),
@@ -211,6 +223,24 @@ mod tests {
         let moments = points
             .iter()
             .fold(Moments::default(), |m, p| m.plus(&Moments::of_point(p)));
+        (points, moments)
+    }
+
+    #[test]
+    fn squared_distances_match_the_returns_distances() {
+        let (points, moments) = four_returns();
+        let normal = Vector3::new(0.1, -0.2, 1.0).normalize();
+        let offset = -1.2;
+        let direct: f64 = points
+            .iter()
+            .map(|p| (p.dot(&normal) - offset).powi(2))
+            .sum();
+        assert!((moments.squared_distances(&normal, offset) - direct).abs() < 1e-10);
+    }
+
+    #[test]
+    fn the_scatter_of_moments_is_the_centred_scatter() {
+        let (points, moments) = four_returns();
         let (centroid, scatter) = moments.scatter().expect("points");
         let mean = points.iter().sum::<Vector3<f64>>() / 4.0;
         let centred: Matrix3<f64> = points
