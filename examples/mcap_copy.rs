@@ -27,6 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let summary = summary_reader.finish().ok_or("no summary")?;
     let mut writer = mcap::WriteOptions::new()
         .chunk_size(Some(4 << 20))
+        .compression_level(looming::output::DEFAULT_ZSTD_LEVEL)
         .compression_threads(0)
         .create(BufWriter::with_capacity(
             1 << 20,

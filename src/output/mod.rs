@@ -52,6 +52,13 @@ pub enum OutputCompression {
     None,
 }
 
+/// zstd level of the chunks `process` writes. At the library's default 3,
+/// compressing our channels took 8 % of `process`' CPU at 64 x 2048; level
+/// 1 takes 4 % less CPU overall for 0.3 % more output (3 s safe-drive log,
+/// three alternating runs). The input's own chunks are copied, not
+/// recompressed.
+pub const DEFAULT_ZSTD_LEVEL: u32 = 1;
+
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct OutputOptions {
     pub compression: OutputCompression,
@@ -59,7 +66,8 @@ pub struct OutputOptions {
     pub chunk_size_bytes: u64,
     /// Replace an existing output file.
     pub force: bool,
-    /// zstd / lz4 level; 0 = the library default (zstd 3).
+    /// zstd / lz4 level; 0 = the library default (zstd 3). `process`
+    /// writes at [`DEFAULT_ZSTD_LEVEL`].
     pub compression_level: u32,
     /// MCAP header profile: empty for `process` output (our channels are not
     /// CDR), `ros2` for synthetic logs.
@@ -72,7 +80,7 @@ impl Default for OutputOptions {
             compression: OutputCompression::Zstd,
             chunk_size_bytes: 4 << 20,
             force: false,
-            compression_level: 0,
+            compression_level: DEFAULT_ZSTD_LEVEL,
             profile: String::new(),
         }
     }
