@@ -44,6 +44,28 @@ impl RowExtremes {
         }
     }
 
+    /// Whether `within` holds for the `[smallest, largest]` range of each
+    /// of rows `rows` in columns `col - half_cols ..= col + half_cols`
+    /// ([`Self::window`] row by row, the width looked up once; stops at the
+    /// first row it fails); None when that half width is not held or a row
+    /// is beyond the image.
+    pub fn rows_all(
+        &self,
+        rows: std::ops::RangeInclusive<usize>,
+        col: usize,
+        half_cols: usize,
+        within: impl Fn([f64; 2]) -> bool,
+    ) -> Option<bool> {
+        let held = self.half_widths.iter().position(|&h| h == half_cols)?;
+        let per_row = self.half_widths.len() * self.cols;
+        for row in rows {
+            if !within(*self.extremes.get(row * per_row + held * self.cols + col)?) {
+                return Some(false);
+            }
+        }
+        Some(true)
+    }
+
     /// `[smallest, largest]` range of `row`'s returns in columns `col -
     /// half_cols ..= col + half_cols`; None when that half width is not held
     /// (or the window is wider than the image).
@@ -143,6 +165,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn rows_all_asks_each_rows_window_in_turn() {
+        let (rows, cols) = (3, 12);
+        let ranges: Vec<f64> = (0..rows * cols)
+            .map(|i| if i % 4 == 1 { f64::NAN } else { 5.0 + i as f64 })
+            .collect();
+        let extremes = RowExtremes::new(&ranges, cols, &[1, 2]);
+        for col in 0..cols {
+            for half in [1, 2] {
+                for bound in [8.0, 20.0, 40.0, 60.0] {
+                    let below = |[_, far]: [f64; 2]| !(far > bound);
+                    let expected =
+                        (0..rows).all(|r| below(extremes.window(r, col, half).expect("held")));
+                    assert_eq!(
+                        extremes.rows_all(0..=rows - 1, col, half, below),
+                        Some(expected)
+                    );
+                }
+            }
+        }
+        assert_eq!(extremes.rows_all(0..=1, 0, 3, |_| true), None, "not held");
+        assert_eq!(
+            extremes.rows_all(2..=3, 0, 1, |_| true),
+            None,
+            "beyond the image"
+        );
     }
 
     #[test]
