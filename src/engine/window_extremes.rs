@@ -68,7 +68,8 @@ impl RowExtremes {
 
     /// `[smallest, largest]` range of `row`'s returns in columns `col -
     /// half_cols ..= col + half_cols`; None when that half width is not held
-    /// (or the window is wider than the image).
+    /// (or the window is wider than the image). (The fits ask [`Self::rows_all`].)
+    #[cfg(test)]
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<[f64; 2]> {
         let held = self.half_widths.iter().position(|&h| h == half_cols)?;
         let per_row = self.half_widths.len() * self.cols;
@@ -106,22 +107,29 @@ fn row_extremes(ranges: &[f64], wanted: &[usize], out: &mut [[f64; 2]]) {
 /// the sweep. `f64::min` and `max` pass over NaN (empty cells).
 fn widen(extremes: &[[f64; 2]], shift: usize, out: &mut [[f64; 2]]) {
     let cols = extremes.len();
-    for (col, out) in out.iter_mut().enumerate() {
-        let before = extremes[if col >= shift {
-            col - shift
-        } else {
-            col + cols - shift
-        }];
-        let after = extremes[if col + shift < cols {
-            col + shift
-        } else {
-            col + shift - cols
-        }];
-        let own = extremes[col];
-        *out = [
+    let at = |own: [f64; 2], before: [f64; 2], after: [f64; 2]| {
+        [
             own[0].min(before[0]).min(after[0]),
             own[1].max(before[1]).max(after[1]),
-        ];
+        ]
+    };
+    // The columns whose window wraps around the sweep, then the rest
+    // (no wrapping: straight slices the compiler can run through).
+    for col in (0..shift.min(cols)).chain(cols.saturating_sub(shift).max(shift)..cols) {
+        let before = extremes[(col + cols - shift) % cols];
+        let after = extremes[(col + shift) % cols];
+        out[col] = at(extremes[col], before, after);
+    }
+    if cols > 2 * shift {
+        let inner = shift..cols - shift;
+        for (((out, &own), &before), &after) in out[inner.clone()]
+            .iter_mut()
+            .zip(&extremes[inner.clone()])
+            .zip(&extremes[..cols - 2 * shift])
+            .zip(&extremes[2 * shift..])
+        {
+            *out = at(own, before, after);
+        }
     }
 }
 
