@@ -209,10 +209,9 @@ mod tests {
             .fold(Moments::default(), |m, p| m.plus(&Moments::of_point(&p)))
     }
 
-    #[test]
-    fn windows_match_direct_sums_including_across_the_seam() {
-        let (rows, cols) = (3, 16);
-        let points: Vec<Vector3<f64>> = (0..rows * cols)
+    /// The returns of a `rows x cols` image, every seventh cell empty.
+    fn returns_with_gaps(rows: usize, cols: usize) -> Vec<Vector3<f64>> {
+        (0..rows * cols)
             .map(|i| {
                 if i % 7 == 3 {
                     Vector3::repeat(f64::NAN)
@@ -221,7 +220,13 @@ mod tests {
                     Vector3::new(10.0 + f.sin(), f * 0.25, -1.5 + 0.01 * f)
                 }
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn windows_match_direct_sums_including_across_the_seam() {
+        let (rows, cols) = (3, 16);
+        let points = returns_with_gaps(rows, cols);
         let sums = RowSums::new(&points, cols);
         for row in 0..rows {
             for col in 0..cols {
@@ -247,16 +252,7 @@ mod tests {
     #[test]
     fn windows_over_rows_are_the_rows_windows_summed_in_order() {
         let (rows, cols) = (4, 16);
-        let points: Vec<Vector3<f64>> = (0..rows * cols)
-            .map(|i| {
-                if i % 5 == 1 {
-                    Vector3::repeat(f64::NAN)
-                } else {
-                    let f = i as f64;
-                    Vector3::new(30.0 + 3.0 * f.cos(), f * 0.37, -1.2 + 0.02 * f)
-                }
-            })
-            .collect();
+        let points = returns_with_gaps(rows, cols);
         let sums = RowSums::new(&points, cols);
         for col in 0..cols {
             for half in [0, 2, 5, 7] {
