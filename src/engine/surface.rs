@@ -601,25 +601,37 @@ fn gated_window(
     cell: usize,
     (half_rows, half_cols): (usize, usize),
 ) -> Option<GatedWindow> {
-    let range_m = returns.point(cell)?.norm();
+    // `ranges` is NaN exactly where the cell is empty.
+    let range_m = returns.ranges[cell];
+    if range_m.is_nan() {
+        return None;
+    }
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
     let gate_m = 0.3 * range_m + 0.5;
-    let mut window = GatedWindow {
-        range_m,
-        total: Moments::default(),
-        first_row: row.saturating_sub(half_rows),
-        last_row: (row + half_rows).min(geometry.rows - 1),
+    let (first_row, last_row) = (
+        row.saturating_sub(half_rows),
+        (row + half_rows).min(geometry.rows - 1),
+    );
+    // Every row's gate first: a window failing it sums no moments.
+    let gated = returns.extremes.rows_all(
+        first_row..=last_row,
         col,
         half_cols,
-    };
-    for r in window.first_row..=window.last_row {
-        let [nearest_m, farthest_m] = returns.extremes.window(r, col, half_cols)?;
-        if range_m - nearest_m > gate_m || farthest_m - range_m > gate_m {
-            return None;
-        }
-        window.total = window.total.plus(&returns.sums.window(r, col, half_cols)?);
+        |[nearest_m, farthest_m]| !(range_m - nearest_m > gate_m || farthest_m - range_m > gate_m),
+    )?;
+    if !gated {
+        return None;
     }
-    Some(window)
+    Some(GatedWindow {
+        range_m,
+        total: returns
+            .sums
+            .window_over_rows(first_row..=last_row, col, half_cols)?,
+        first_row,
+        last_row,
+        col,
+        half_cols,
+    })
 }
 
 /// Whether [`fit_window`] would fit the window's returns whole

@@ -44,9 +44,32 @@ impl RowExtremes {
         }
     }
 
+    /// Whether `within` holds for the `[smallest, largest]` range of each
+    /// of rows `rows` in columns `col - half_cols ..= col + half_cols`
+    /// ([`Self::window`] row by row, the width looked up once; stops at the
+    /// first row it fails); None when that half width is not held or a row
+    /// is beyond the image.
+    pub fn rows_all(
+        &self,
+        rows: std::ops::RangeInclusive<usize>,
+        col: usize,
+        half_cols: usize,
+        within: impl Fn([f64; 2]) -> bool,
+    ) -> Option<bool> {
+        let held = self.half_widths.iter().position(|&h| h == half_cols)?;
+        let per_row = self.half_widths.len() * self.cols;
+        for row in rows {
+            if !within(*self.extremes.get(row * per_row + held * self.cols + col)?) {
+                return Some(false);
+            }
+        }
+        Some(true)
+    }
+
     /// `[smallest, largest]` range of `row`'s returns in columns `col -
     /// half_cols ..= col + half_cols`; None when that half width is not held
-    /// (or the window is wider than the image).
+    /// (or the window is wider than the image). (The fits ask [`Self::rows_all`].)
+    #[cfg(test)]
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<[f64; 2]> {
         let held = self.half_widths.iter().position(|&h| h == half_cols)?;
         let per_row = self.half_widths.len() * self.cols;
@@ -84,22 +107,29 @@ fn row_extremes(ranges: &[f64], wanted: &[usize], out: &mut [[f64; 2]]) {
 /// the sweep. `f64::min` and `max` pass over NaN (empty cells).
 fn widen(extremes: &[[f64; 2]], shift: usize, out: &mut [[f64; 2]]) {
     let cols = extremes.len();
-    for (col, out) in out.iter_mut().enumerate() {
-        let before = extremes[if col >= shift {
-            col - shift
-        } else {
-            col + cols - shift
-        }];
-        let after = extremes[if col + shift < cols {
-            col + shift
-        } else {
-            col + shift - cols
-        }];
-        let own = extremes[col];
-        *out = [
+    let at = |own: [f64; 2], before: [f64; 2], after: [f64; 2]| {
+        [
             own[0].min(before[0]).min(after[0]),
             own[1].max(before[1]).max(after[1]),
-        ];
+        ]
+    };
+    // The columns whose window wraps around the sweep, then the rest
+    // (no wrapping: straight slices the compiler can run through).
+    for col in (0..shift.min(cols)).chain(cols.saturating_sub(shift).max(shift)..cols) {
+        let before = extremes[(col + cols - shift) % cols];
+        let after = extremes[(col + shift) % cols];
+        out[col] = at(extremes[col], before, after);
+    }
+    if cols > 2 * shift {
+        let inner = shift..cols - shift;
+        for (((out, &own), &before), &after) in out[inner.clone()]
+            .iter_mut()
+            .zip(&extremes[inner.clone()])
+            .zip(&extremes[..cols - 2 * shift])
+            .zip(&extremes[2 * shift..])
+        {
+            *out = at(own, before, after);
+        }
     }
 }
 
@@ -143,6 +173,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn rows_all_asks_each_rows_window_in_turn() {
+        let (rows, cols) = (3, 12);
+        let ranges: Vec<f64> = (0..rows * cols)
+            .map(|i| if i % 4 == 1 { f64::NAN } else { 5.0 + i as f64 })
+            .collect();
+        let extremes = RowExtremes::new(&ranges, cols, &[1, 2]);
+        for col in 0..cols {
+            for half in [1, 2] {
+                for bound in [8.0, 20.0, 40.0, 60.0] {
+                    let below = |[_, far]: [f64; 2]| far.is_nan() || far <= bound;
+                    let expected =
+                        (0..rows).all(|r| below(extremes.window(r, col, half).expect("held")));
+                    assert_eq!(
+                        extremes.rows_all(0..=rows - 1, col, half, below),
+                        Some(expected)
+                    );
+                }
+            }
+        }
+        assert_eq!(extremes.rows_all(0..=1, 0, 3, |_| true), None, "not held");
+        assert_eq!(
+            extremes.rows_all(2..=3, 0, 1, |_| true),
+            None,
+            "beyond the image"
+        );
     }
 
     #[test]

@@ -125,9 +125,41 @@ impl RowSums {
         Self { cols, running }
     }
 
+    /// Moments of the returns of rows `rows` in columns `col - half_cols
+    /// ..= col + half_cols`: the sum of [`Self::window`] over the rows, in
+    /// order (the same bits), with the window's span found once for all
+    /// rows. None when the window is wider than the image (or a row beyond it).
+    pub fn window_over_rows(
+        &self,
+        rows: std::ops::RangeInclusive<usize>,
+        col: usize,
+        half_cols: usize,
+    ) -> Option<Moments> {
+        let mut total = Moments::default();
+        if col >= half_cols && col + half_cols < self.cols {
+            let stride = self.cols + 1;
+            let (from, to) = (col - half_cols, col + half_cols + 1);
+            for row in rows {
+                let base = row * stride;
+                let (Some(to), Some(from)) =
+                    (self.running.get(base + to), self.running.get(base + from))
+                else {
+                    return None;
+                };
+                total = total.plus(&to.minus(from));
+            }
+            return Some(total);
+        }
+        for row in rows {
+            total = total.plus(&self.window(row, col, half_cols)?);
+        }
+        Some(total)
+    }
+
     /// Moments of `row`'s returns in columns `col - half_cols ..= col +
     /// half_cols` (wrapping around the sweep); None when the window is wider
     /// than the image.
+    #[inline]
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<Moments> {
         let base = row * (self.cols + 1);
         if col >= half_cols && col + half_cols < self.cols {
@@ -177,10 +209,9 @@ mod tests {
             .fold(Moments::default(), |m, p| m.plus(&Moments::of_point(&p)))
     }
 
-    #[test]
-    fn windows_match_direct_sums_including_across_the_seam() {
-        let (rows, cols) = (3, 16);
-        let points: Vec<Vector3<f64>> = (0..rows * cols)
+    /// The returns of a `rows x cols` image, every seventh cell empty.
+    fn returns_with_gaps(rows: usize, cols: usize) -> Vec<Vector3<f64>> {
+        (0..rows * cols)
             .map(|i| {
                 if i % 7 == 3 {
                     Vector3::repeat(f64::NAN)
@@ -189,7 +220,13 @@ mod tests {
                     Vector3::new(10.0 + f.sin(), f * 0.25, -1.5 + 0.01 * f)
                 }
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn windows_match_direct_sums_including_across_the_seam() {
+        let (rows, cols) = (3, 16);
+        let points = returns_with_gaps(rows, cols);
         let sums = RowSums::new(&points, cols);
         for row in 0..rows {
             for col in 0..cols {
@@ -210,6 +247,36 @@ mod tests {
             }
         }
         assert!(sums.window(0, 0, 8).is_none(), "wider than the image");
+    }
+
+    #[test]
+    fn windows_over_rows_are_the_rows_windows_summed_in_order() {
+        let (rows, cols) = (4, 16);
+        let points = returns_with_gaps(rows, cols);
+        let sums = RowSums::new(&points, cols);
+        for col in 0..cols {
+            for half in [0, 2, 5, 7] {
+                for (first, last) in [(0, 0), (0, 2), (1, 3), (2, 3)] {
+                    let expected = (first..=last).fold(Moments::default(), |m, r| {
+                        m.plus(&sums.window(r, col, half).expect("fits"))
+                    });
+                    let got = sums.window_over_rows(first..=last, col, half);
+                    assert_eq!(
+                        got,
+                        Some(expected),
+                        "col {col} half {half} rows {first}..={last}"
+                    );
+                }
+            }
+        }
+        assert!(
+            sums.window_over_rows(0..=1, 0, 8).is_none(),
+            "wider than the image"
+        );
+        assert!(
+            sums.window_over_rows(3..=4, 8, 2).is_none(),
+            "a row beyond the image"
+        );
     }
 
     /// Four returns near a plane 20 m ahead, and their moments.
