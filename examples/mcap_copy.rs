@@ -1,6 +1,7 @@
 //! The floor for `looming process` benchmarks: a plain copy of every message
 //! with the mcap crate (read through the summary in log-time order, written with
-//! the same compression and chunk size as `looming process`), single-threaded.
+//! the compression and chunk size `looming process` writes its own chunks
+//! with beside passed-through ones), single-threaded.
 //! `cargo run --release --example mcap_copy -- IN.mcap OUT.mcap`
 
 use std::io::{BufWriter, Read, Seek, SeekFrom};
@@ -27,7 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let summary = summary_reader.finish().ok_or("no summary")?;
     let mut writer = mcap::WriteOptions::new()
         .chunk_size(Some(4 << 20))
-        .compression_level(looming::output::DEFAULT_ZSTD_LEVEL)
+        .compression_level(looming::output::OWN_CHUNKS_ZSTD_LEVEL)
         .compression_threads(0)
         .create(BufWriter::with_capacity(
             1 << 20,
