@@ -294,10 +294,14 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
 /// The image geometry of a pair: rows from `ring` when both clouds have it
 /// (beam elevations measured per ring), else a beam table inferred from the
 /// current scan; columns from `columns`, else the most points any row holds.
+///
+/// `previous_cols`: the columns the previous pair's images had; kept where
+/// this scan's count is within [`KEPT_COLUMNS_TOLERANCE`] of it.
 pub fn geometry_for(
     previous: &Scan,
     current: &Scan,
     columns: Option<usize>,
+    previous_cols: Option<usize>,
 ) -> Option<ImageGeometry> {
     if let (Some(rings), Some(_)) = (&current.ring, &previous.ring) {
         let rows = rings
@@ -309,8 +313,10 @@ pub fn geometry_for(
             return None;
         }
         let (beams, ring_to_row, parallax_rad_m) = ring_elevations(current, rows)?;
-        let cols = columns
-            .unwrap_or_else(|| most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows));
+        let cols = columns.unwrap_or_else(|| {
+            let counted = most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows);
+            kept_columns(counted, previous_cols)
+        });
         return (cols >= 8).then_some(ImageGeometry {
             rows,
             cols,
@@ -327,7 +333,9 @@ pub fn geometry_for(
     let beams = BeamTable::infer(&elevations, 256)?;
     let rows = beams.len();
     let cols = columns.unwrap_or_else(|| {
-        most_points_per_row(elevations.iter().map(|&e| beams.row_of(f64::from(e))), rows)
+        let counted =
+            most_points_per_row(elevations.iter().map(|&e| beams.row_of(f64::from(e))), rows);
+        kept_columns(counted, previous_cols)
     });
     (cols >= 8).then_some(ImageGeometry {
         rows,
@@ -337,6 +345,27 @@ pub fn geometry_for(
         parallax_rad_m: None,
     })
 }
+
+/// The previous pair's column count where `counted` (this scan's most
+/// points in a row) is within [`KEPT_COLUMNS_TOLERANCE`] of it, else
+/// `counted`. A real sensor's count moves by a few percent from scan to
+/// scan (dropouts, doubled returns: KITTI 2068-2147); a new count changes
+/// the image's cells, and the next pair then rebuilds the previous scan's
+/// image and surfaces instead of reusing them (`EngineCache`).
+fn kept_columns(counted: usize, previous_cols: Option<usize>) -> usize {
+    match previous_cols {
+        Some(cols)
+            if (counted as f64 - cols as f64).abs() <= KEPT_COLUMNS_TOLERANCE * cols as f64 =>
+        {
+            cols
+        }
+        _ => counted,
+    }
+}
+
+/// Largest relative change of a scan's column count that keeps the
+/// previous pair's.
+const KEPT_COLUMNS_TOLERANCE: f64 = 0.05;
 
 fn most_points_per_row(rows_of_points: impl Iterator<Item = usize>, rows: usize) -> usize {
     let mut counts = vec![0usize; rows];
@@ -598,6 +627,18 @@ mod tests {
         }
         assert_eq!(walk_to_partition(n, &at, f64::NAN, 4), 0);
         assert_eq!(bisect_to_partition(n, &at, f64::NAN), 0);
+    }
+
+    #[test]
+    fn a_scans_column_count_keeps_the_previous_pairs_within_five_percent() {
+        assert_eq!(kept_columns(2081, None), 2081);
+        // KITTI's counts over consecutive scans keep the first.
+        for counted in [2106, 2093, 2068, 2141, 2147, 2137] {
+            assert_eq!(kept_columns(counted, Some(2081)), 2081, "{counted}");
+        }
+        // A real change of resolution takes the new count.
+        assert_eq!(kept_columns(1024, Some(2081)), 1024);
+        assert_eq!(kept_columns(2200, Some(2081)), 2200);
     }
 
     #[test]

@@ -175,6 +175,16 @@ pub struct EngineCache {
     last: Option<CachedScan>,
     /// The sensor's per-laser range offsets, averaged over the log's scans.
     range_bias: bias::RangeBias,
+    /// Pairs whose previous scan's image and surfaces came from the cache.
+    reused_scans: u64,
+}
+
+impl EngineCache {
+    /// Pairs so far whose previous scan's image and surfaces were reused
+    /// (all but the first of a stream, while its geometry holds).
+    pub fn reused_scans(&self) -> u64 {
+        self.reused_scans
+    }
 }
 
 struct CachedScan {
@@ -182,7 +192,6 @@ struct CachedScan {
     rows: usize,
     cols: usize,
     ring_to_row: Option<Vec<usize>>,
-    parallax_rad_m: Option<Vec<f64>>,
     image: RangeImage,
     surfaces: Surfaces,
     /// The motion estimated for the pair that ended at this scan (velocity,
@@ -197,7 +206,8 @@ impl CachedScan {
             && self.rows == geometry.rows
             && self.cols == geometry.cols
             && self.ring_to_row == geometry.ring_to_row
-            && self.parallax_rad_m == geometry.parallax_rad_m
+            // (Not the lasers' parallax, fitted anew on every scan: the
+            // image and surfaces do not depend on it.)
             // Rows from elevation depend on the whole beam table.
             && geometry.ring_to_row.is_some()
     }
@@ -216,7 +226,14 @@ pub fn compute_with_cache(
     cache: &mut EngineCache,
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
-    let geometry = grid::geometry_for(previous, current, config.columns)?;
+    // The columns the cached scan was gridded with, kept where this scan
+    // allows, so that the cache holds.
+    let cached_cols = cache
+        .last
+        .as_ref()
+        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
+        .map(|c| c.cols);
+    let geometry = grid::geometry_for(previous, current, config.columns, cached_cols)?;
     let params = SurfaceParams::for_geometry(&geometry, config.range_noise_m);
     let last = cache.last.take();
     let previous_estimate = last
@@ -224,6 +241,10 @@ pub fn compute_with_cache(
         .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
         .and_then(|c| c.estimate);
     let cached = last.filter(|c| c.matches(&pair.previous, &geometry));
+    cache.reused_scans += u64::from(cached.is_some());
+    if std::env::var_os("LOOMING_DEBUG_CACHE").is_some() {
+        eprintln!("CACHE {} cols {}", cached.is_some(), geometry.cols);
+    }
     // Each scan's offsets join the sensor's running estimate in time order
     // (the previous scan first, when it was not cached).
     let correct = config.correct_range_bias;
@@ -287,7 +308,6 @@ pub fn compute_with_cache(
         rows: geometry.rows,
         cols: geometry.cols,
         ring_to_row: geometry.ring_to_row.clone(),
-        parallax_rad_m: geometry.parallax_rad_m.clone(),
         image: cur_image,
         surfaces: cur_surfaces,
         estimate,

@@ -1,0 +1,89 @@
+//! The engine's cache of the previous scan's image and surfaces holds on a
+//! stream whose scans' column counts move by a few percent, as a real
+//! sensor's do (dropouts, doubled returns): the pair keeps the previous
+//! pair's columns instead of gridding both scans anew.
+
+use std::sync::Arc;
+
+use looming::engine::{self, EngineCache, EngineConfig};
+use looming::messages::Scan;
+use looming::pairing::ScanPair;
+use looming::synth::{scene, sensor::World, simulated_pair};
+
+fn world() -> World {
+    let mut scenario = scene::load("straight-road").unwrap();
+    scenario.lidar.beams = 32;
+    scenario.lidar.columns = 512;
+    World::new(scenario)
+}
+
+/// `scan` without its last `drop` points (the last columns of the sweep):
+/// every per-point field cut alike.
+fn without_last(scan: &Scan, drop: usize) -> Scan {
+    let keep = scan.points_m.len() - drop;
+    let mut cut = scan.clone();
+    cut.points_m.truncate(keep);
+    cut.source_index.truncate(keep);
+    for values in [&mut cut.intensity, &mut cut.time_offset_s]
+        .into_iter()
+        .flatten()
+    {
+        values.truncate(keep);
+    }
+    if let Some(rings) = &mut cut.ring {
+        rings.truncate(keep);
+    }
+    cut
+}
+
+/// Consecutive pairs sharing their scans, as the pairer emits them, the
+/// current scan of pair k cut by `drops[k]` points.
+fn stream(world: &World, drops: &[usize]) -> Vec<ScanPair> {
+    let mut pairs: Vec<ScanPair> = Vec::new();
+    for (k, &drop) in drops.iter().enumerate() {
+        let mut pair = simulated_pair(world, 10 + k as u64, 1);
+        pair.current = Arc::new(without_last(&pair.current, drop));
+        if let Some(before) = pairs.last() {
+            pair.previous = before.current.clone();
+        }
+        pairs.push(pair);
+    }
+    pairs
+}
+
+/// The engine on [`stream`]: each pair's image columns, and how many pairs
+/// reused the previous scan's image and surfaces.
+fn run(world: &World, drops: &[usize]) -> (Vec<usize>, u64) {
+    let config = EngineConfig::default();
+    let mut cache = EngineCache::default();
+    let columns = stream(world, drops)
+        .iter()
+        .map(|pair| {
+            let result = engine::compute_with_cache(pair, &config, &mut cache).expect("an image");
+            result.geometry.cols
+        })
+        .collect();
+    (columns, cache.reused_scans())
+}
+
+#[test]
+fn the_previous_scan_is_reused_while_the_column_count_moves_a_little() {
+    let world = world();
+    let rows = 32;
+    // Up to 4 % fewer points per ring from scan to scan.
+    let drops = [0, 5 * rows, 0, 20 * rows, 11 * rows, 0];
+    let (columns, reused) = run(&world, &drops);
+    assert!(columns.iter().all(|&c| c == columns[0]), "{columns:?}");
+    assert_eq!(reused, drops.len() as u64 - 1);
+}
+
+#[test]
+fn a_new_resolution_grids_both_scans_anew() {
+    let world = world();
+    // A third of the sweep gone: not the same sensor mode.
+    let drops = [0, 170 * 32, 170 * 32];
+    let (columns, reused) = run(&world, &drops);
+    assert!(columns[1] < columns[0], "{columns:?}");
+    assert_eq!(columns[2], columns[1]);
+    assert_eq!(reused, 1);
+}
