@@ -766,6 +766,60 @@ mod tests {
     use super::*;
 
     #[test]
+    fn cached_transforms_are_the_trajectorys_relative_ones_bit_for_bit() {
+        let mut scenario = crate::synth::scene::load("urban-turn").unwrap();
+        scenario.lidar.beams = 16;
+        scenario.lidar.columns = 64;
+        let world = crate::synth::sensor::World::new(scenario);
+        let pair = crate::synth::simulated_pair(&world, 12, 1);
+        let (start_ns, end_ns) = (
+            pair.previous.stamp_ns - 1_000_000,
+            pair.current.stamp_ns + 101_000_000,
+        );
+        let trajectory = Trajectory::integrate(
+            &pair.motion,
+            super::super::trajectory::MotionModel::Full,
+            true,
+            start_ns,
+            end_ns,
+        )
+        .unwrap();
+        // Columns fired every 1.5625 ms over the current sweep, one without a time.
+        let mut column_time_ns: Vec<StampNs> = (0..64)
+            .map(|c| pair.current.stamp_ns + c * 1_562_500)
+            .collect();
+        column_time_ns[7] = StampNs::MIN;
+        let arrivals = arrival_poses(&column_time_ns, &trajectory);
+        let mut cache = TransformCache::new(&trajectory, &arrivals);
+        let same = |a: Isometry3<f64>, b: Isometry3<f64>| {
+            a.translation
+                .vector
+                .iter()
+                .zip(b.translation.vector.iter())
+                .chain(a.rotation.coords.iter().zip(b.rotation.coords.iter()))
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        // Departures repeating and changing, arrivals in columns and at
+        // times, the column cache wrapping round.
+        for k in 0..400i64 {
+            let from_ns = pair.previous.stamp_ns + (k / 3) * 700_000;
+            let to_ns = from_ns + 100_000_000 + (k % 5) * 333_333;
+            assert!(same(
+                cache.until(from_ns, to_ns),
+                trajectory.relative(from_ns, to_ns)
+            ));
+            let col = ((k * 7) % 64) as usize;
+            if column_time_ns[col] != StampNs::MIN {
+                let expected = trajectory.relative(from_ns, column_time_ns[col]);
+                assert!(
+                    same(cache.until_column(from_ns, col), expected),
+                    "k {k} col {col}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn a_turn_matches_atan2_within_rounding() {
         let mut worst = 0.0f64;
         for i in 0..20_000 {
