@@ -242,9 +242,6 @@ pub fn compute_with_cache(
         .and_then(|c| c.estimate);
     let cached = last.filter(|c| c.matches(&pair.previous, &geometry));
     cache.reused_scans += u64::from(cached.is_some());
-    if std::env::var_os("LOOMING_DEBUG_CACHE").is_some() {
-        eprintln!("CACHE {} cols {}", cached.is_some(), geometry.cols);
-    }
     // Each scan's offsets join the sensor's running estimate in time order
     // (the previous scan first, when it was not cached).
     let correct = config.correct_range_bias;
