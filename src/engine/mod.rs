@@ -201,9 +201,9 @@ struct CachedScan {
 }
 
 impl CachedScan {
-    fn matches(&self, scan: &std::sync::Arc<Scan>, geometry: &ImageGeometry) -> bool {
-        std::sync::Arc::ptr_eq(&self.scan, scan)
-            && self.rows == geometry.rows
+    /// Whether the scan was gridded as `geometry` grids it.
+    fn matches(&self, geometry: &ImageGeometry) -> bool {
+        self.rows == geometry.rows
             && self.cols == geometry.cols
             && self.ring_to_row == geometry.ring_to_row
             // (Not the lasers' parallax, fitted anew on every scan: the
@@ -226,21 +226,22 @@ pub fn compute_with_cache(
     cache: &mut EngineCache,
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
-    // The columns the cached scan was gridded with, kept where this scan
-    // allows, so that the cache holds.
-    let cached_cols = cache
+    // What the cache holds of this pair's previous scan (nothing of any
+    // other): its columns, kept where this scan allows so that the cache
+    // holds, and the motion estimated up to it.
+    let last = cache
         .last
-        .as_ref()
-        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
-        .map(|c| c.cols);
-    let geometry = grid::geometry_for(previous, current, config.columns, cached_cols)?;
+        .take()
+        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous));
+    let geometry = grid::geometry_for(
+        previous,
+        current,
+        config.columns,
+        last.as_ref().map(|c| c.cols),
+    )?;
     let params = SurfaceParams::for_geometry(&geometry, config.range_noise_m);
-    let last = cache.last.take();
-    let previous_estimate = last
-        .as_ref()
-        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous))
-        .and_then(|c| c.estimate);
-    let cached = last.filter(|c| c.matches(&pair.previous, &geometry));
+    let previous_estimate = last.as_ref().and_then(|c| c.estimate);
+    let cached = last.filter(|c| c.matches(&geometry));
     cache.reused_scans += u64::from(cached.is_some());
     // Each scan's offsets join the sensor's running estimate in time order
     // (the previous scan first, when it was not cached).

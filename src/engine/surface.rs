@@ -480,7 +480,7 @@ fn fit_gated_points(
     points.clear();
     points.push(center);
     let mut far_neighbours = 0;
-    let gate_m = 0.3 * range + 0.5;
+    let gate_m = range_gate_m(range);
     let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
     for r in row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1) {
         for offset in 0..=2 * half_cols {
@@ -511,7 +511,7 @@ fn fit_gated_points(
         );
     };
     // Points off the plane by more than noise belong to another surface.
-    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
+    let tolerance = plane_tolerance_m(params, range);
     on_plane.clear();
     on_plane.extend(
         points
@@ -564,7 +564,7 @@ fn fit_whole_window(
     }
     let (centroid, covariance) = moments.scatter()?;
     let plane = plane_of_scatter(moments.count, centroid, &covariance)?;
-    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
+    let tolerance = plane_tolerance_m(params, range);
     if !window_on_plane(returns, cols, window, &plane, tolerance) {
         return None;
     }
@@ -607,7 +607,7 @@ fn gated_window(
         return None;
     }
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    let gate_m = 0.3 * range_m + 0.5;
+    let gate_m = range_gate_m(range_m);
     let (first_row, last_row) = (
         row.saturating_sub(half_rows),
         (row + half_rows).min(geometry.rows - 1),
@@ -649,7 +649,7 @@ fn too_narrow(gated: &GatedWindow, params: SurfaceParams) -> bool {
         return false;
     };
     let narrow_m2 = count * (2.0 * params.range_noise_m).powi(2);
-    let tolerance = 4.0 * params.range_noise_m + 0.003 * gated.range_m;
+    let tolerance = plane_tolerance_m(params, gated.range_m);
     let on_plane_m2 = WHOLE_WINDOW_MARGIN * tolerance * tolerance;
     let (trace, minors) = (scatter.trace(), principal_minors(&scatter));
     // The sum of the principal minors is at most three times the product
@@ -739,6 +739,18 @@ fn window_cells(
         .into_iter()
         .flatten()
         .map(move |span| row_start + span.start..row_start + span.end)
+}
+
+/// The loose range gate of a window about a return `range_m` away, metres:
+/// neighbours farther from it in range are not candidates for its plane.
+fn range_gate_m(range_m: f64) -> f64 {
+    0.3 * range_m + 0.5
+}
+
+/// How far off a fitted plane a return `range_m` away may lie and still be
+/// on it, metres: four noise sigmas and the plane's own error with range.
+fn plane_tolerance_m(params: SurfaceParams, range_m: f64) -> f64 {
+    4.0 * params.range_noise_m + 0.003 * range_m
 }
 
 /// A return with no surface fitted: its raw range and direction.
@@ -864,7 +876,7 @@ fn fit_ring_cell(
             ..raw
         };
     };
-    let tolerance = 4.0 * params.range_noise_m + 0.003 * range;
+    let tolerance = plane_tolerance_m(params, range);
     let off_line = |p: &Vector3<f64>| {
         let d = p - centroid;
         (d - tangent * d.dot(&tangent)).norm() > tolerance

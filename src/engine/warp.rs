@@ -109,9 +109,9 @@ pub fn render(
 ) -> Rendered {
     let cells = geometry.cells();
     let arrivals = arrival_poses(target.column_time_ns, trajectory);
-    // Only a ring's segments take their vertices' normals (`rasterize_ring`);
-    // triangles have their own.
-    let with_normals = geometry.sparse_rows();
+    // A sparse sensor's rings are rendered segment by segment, with their
+    // vertices' normals (`rasterize_ring`); triangles have their own.
+    let sparse = geometry.sparse_rows();
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
@@ -127,7 +127,7 @@ pub fn render(
                         scan_offset_ns,
                         row * geometry.cols + col,
                         &mut cache,
-                        with_normals,
+                        sparse,
                     )
                 })
                 .collect()
@@ -144,7 +144,7 @@ pub fn render(
             }
         });
     let proxy = fill_dropouts(source, geometry, &mut vertices);
-    let candidates: Vec<Vec<Candidate>> = if geometry.sparse_rows() {
+    let candidates: Vec<Vec<Candidate>> = if sparse {
         (0..geometry.rows)
             .into_par_iter()
             .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy, row))

@@ -56,10 +56,9 @@ impl RowExtremes {
         half_cols: usize,
         within: impl Fn([f64; 2]) -> bool,
     ) -> Option<bool> {
-        let held = self.half_widths.iter().position(|&h| h == half_cols)?;
-        let per_row = self.half_widths.len() * self.cols;
+        let index = self.index_of(half_cols)?;
         for row in rows {
-            if !within(*self.extremes.get(row * per_row + held * self.cols + col)?) {
+            if !within(*self.extremes.get(index(row, col))?) {
                 return Some(false);
             }
         }
@@ -71,11 +70,16 @@ impl RowExtremes {
     /// (or the window is wider than the image). (The fits ask [`Self::rows_all`].)
     #[cfg(test)]
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<[f64; 2]> {
+        let index = self.index_of(half_cols)?;
+        self.extremes.get(index(row, col)).copied()
+    }
+
+    /// Where the windows of half width `half_cols` keep their extremes,
+    /// by (row, column); None when that width is not held.
+    fn index_of(&self, half_cols: usize) -> Option<impl Fn(usize, usize) -> usize> {
         let held = self.half_widths.iter().position(|&h| h == half_cols)?;
-        let per_row = self.half_widths.len() * self.cols;
-        self.extremes
-            .get(row * per_row + held * self.cols + col)
-            .copied()
+        let (cols, per_row) = (self.cols, self.half_widths.len() * self.cols);
+        Some(move |row, col| row * per_row + held * cols + col)
     }
 }
 
