@@ -12,7 +12,7 @@
 //! per-laser offsets the engine took out).
 
 use looming::engine::{self, EngineCache, EngineConfig, mask};
-use looming::messages::Scan;
+use looming::model::Scan;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

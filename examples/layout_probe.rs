@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use looming::engine::layout;
-use looming::messages::Scan;
+use looming::model::Scan;
 
 fn per_ring(rings: &[u16]) -> (usize, usize, usize) {
     let mut counts: HashMap<u16, usize> = HashMap::new();
@@ -58,7 +58,10 @@ fn old_derive_rings(points: &[[f32; 3]]) -> Vec<u16> {
 
 fn report(scan: &Scan) {
     let rings = scan.ring.as_deref().unwrap_or(&[]);
-    if matches!(scan.layout.rings, layout::RingSource::LaserOrder { .. }) {
+    if matches!(
+        scan.layout.rings,
+        looming::model::RingSource::LaserOrder { .. }
+    ) {
         let old = old_derive_rings(&scan.points_m);
         let same = old.iter().zip(rings).filter(|(a, b)| a == b).count();
         println!(

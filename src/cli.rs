@@ -450,7 +450,7 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
     eprintln!(
         "looming render: pair {} (stamp {}), {} x {} px -> {}",
         summary.pair_index,
-        looming::pipeline::format_log_time(summary.stamp_ns.max(0) as u64),
+        looming::model::format_log_time(summary.stamp_ns.max(0) as u64),
         summary.width_px,
         summary.height_px,
         summary.output.display()
@@ -807,7 +807,7 @@ fn summary_text(s: &RunSummary) -> String {
             out,
             "    {} at {}",
             looming::annotate::foxglove::event_summary(event),
-            looming::pipeline::format_log_time(event.start_log_time_ns)
+            looming::model::format_log_time(event.start_log_time_ns)
         );
     }
     if s.events.len() > 5 {

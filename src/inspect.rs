@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::input::{ChannelInfo, InputError, InputFile, InputOptions, ReadMode};
-use crate::pipeline::format_log_time;
+use crate::model::format_log_time;
 use crate::topics::{Role, TopicOverrides, candidates, select};
 
 /// Everything `inspect` prints, also as JSON.

@@ -15,7 +15,7 @@ pub mod fixtures;
 pub mod input;
 pub mod inspect;
 pub mod kitti;
-pub mod messages;
+pub mod model;
 pub mod output;
 pub mod pairing;
 pub mod pipeline;

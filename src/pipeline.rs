@@ -17,7 +17,7 @@ use std::sync::Arc;
 use crate::budget::{ByteBudget, Ticket};
 use crate::input::{Catalog, CopiedRecord, CopyEvent};
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
-use crate::messages::Decoded;
+use crate::model::{Decoded, format_log_time};
 use crate::output::pairs::{PairRecord, pairs_channel_spec};
 use crate::output::{
     Copied, OutputError, OutputOptions, OutputWriter, WriteMode, check_output_path,
@@ -98,15 +98,6 @@ impl std::fmt::Display for BadMessage {
             self.reason
         )
     }
-}
-
-/// Log time as seconds.nanoseconds, as `mcap cat` prints it.
-pub fn format_log_time(log_time_ns: u64) -> String {
-    format!(
-        "{}.{:09} s",
-        log_time_ns / 1_000_000_000,
-        log_time_ns % 1_000_000_000
-    )
 }
 
 #[derive(Debug, thiserror::Error)]

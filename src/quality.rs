@@ -17,7 +17,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::engine::{PairLooming, ThreatLevel, mask};
-use crate::messages::Scan;
+use crate::model::Scan;
 
 /// Largest angle between a ground cell's normal and the LiDAR's z axis.
 pub const GROUND_MAX_TILT_DEG: f64 = 15.0;

@@ -679,7 +679,7 @@ impl QualityReport {
                 out,
                 "{:>5}  {:>22}  {:>8}  {:>11}  {:>11}  {:>7}  {}",
                 s.index,
-                crate::pipeline::format_log_time(s.log_time_ns),
+                crate::model::format_log_time(s.log_time_ns),
                 percent(s.trusted_fraction),
                 per_s(s.ground_median_abs_fused_per_s),
                 per_s(s.median_abs_d_static_per_s),

@@ -16,7 +16,7 @@ use image::{ImageEncoder, Rgb, RgbImage};
 use crate::annotate::colour;
 use crate::engine::{self, EngineConfig, NO_POINT, PairLooming};
 use crate::input::{InputError, InputFile, InputOptions};
-use crate::pairing::ScanPair;
+use crate::model::ScanPair;
 use crate::replay::{ReplayError, replay_input};
 
 /// What a pixel shows.

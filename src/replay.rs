@@ -4,7 +4,8 @@
 
 use crate::decode::{self, DecodeLimits};
 use crate::input::{Flow, InputError, InputFile, InputMessage, InputOptions, InputRecord};
-use crate::pairing::{PairEvent, PairingConfig, ScanPair, ScanPairer};
+use crate::model::ScanPair;
+use crate::pairing::{PairEvent, PairingConfig, ScanPairer};
 use crate::topics::{Role, TopicError, TopicOverrides, select};
 use std::path::Path;
 

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use common::{FileContents, RawMessage, looming, read_all, scratch, stderr};
 use looming::annotate::colour;
 use looming::engine::{EngineCache, EngineConfig, PairLooming, ThreatLevel, compute_with_cache};
-use looming::pairing::ScanPair;
+use looming::model::ScanPair;
 use prost_reflect::{DescriptorPool, DynamicMessage, Value};
 
 const POSITION_QUANTUM_M: f32 = looming::annotate::foxglove::POSITION_QUANTUM_M;

@@ -8,7 +8,7 @@ use looming::decode::{
     DecodeError, DecodeLimits, MessageKind, WireEncoding, decode, pointcloud2_from_points,
     scan_from_pointcloud2,
 };
-use looming::messages::{Decoded, Scan, VelocitySourceKind};
+use looming::model::{Decoded, Scan, VelocitySourceKind};
 use looming::ros::msgs::{
     Header, Imu, Odometry, PointCloud2, PointField, Pose, PoseWithCovariance, Quaternion,
     TFMessage, Time, Transform, TransformStamped, Twist, TwistStamped, TwistWithCovariance,
@@ -1386,7 +1386,7 @@ fn garbage_and_mutated_input_never_panics() {
 
 #[test]
 fn ring_fields_under_their_common_names_and_integer_types() {
-    use looming::engine::layout::RingSource;
+    use looming::model::RingSource;
     let integers = [
         datatype::INT8,
         datatype::UINT8,

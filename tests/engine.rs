@@ -260,7 +260,7 @@ fn the_motion_is_estimated_from_the_static_world_where_no_source_measured_it() {
     assert!(pairs.len() >= 8, "{} pairs", pairs.len());
     let config = EngineConfig::default();
     let mut cache = looming::engine::EngineCache::default();
-    let mut previous_blind: Option<std::sync::Arc<looming::messages::Scan>> = None;
+    let mut previous_blind: Option<std::sync::Arc<looming::model::Scan>> = None;
     let (mut worst_v, mut worst_w) = (0f64, 0f64);
     for pair in &pairs {
         let stamp_ns = pair.current.stamp_ns;

@@ -6,8 +6,8 @@
 use std::sync::Arc;
 
 use looming::engine::{self, EngineCache, EngineConfig};
-use looming::messages::Scan;
-use looming::pairing::ScanPair;
+use looming::model::Scan;
+use looming::model::ScanPair;
 use looming::synth::{scene, sensor::World, simulated_pair};
 
 fn world() -> World {

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use common::{looming, scratch, stderr};
 use looming::decode::{self, DecodeLimits, MessageKind, WireEncoding};
 use looming::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
-use looming::messages::{Decoded, ImuSample, Scan, VelocitySample};
+use looming::model::{Decoded, ImuSample, Scan, VelocitySample};
 use nalgebra::{Isometry3, UnitQuaternion};
 
 const PERIOD_NS: i64 = 100_000_000;

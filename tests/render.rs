@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use looming::annotate::colour;
 use looming::engine::{self, EngineConfig, NO_POINT, PairLooming};
 use looming::input::{InputFile, InputOptions};
+use looming::model::ScanPair;
 use looming::output::OutputOptions;
-use looming::pairing::ScanPair;
 use looming::render::{RenderAt, RenderChannel, RenderError, RenderOptions, RenderView, render};
 use looming::synth::{SynthOptions, synthesize};
 

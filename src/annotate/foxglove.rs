@@ -10,7 +10,7 @@ use foxglove::messages::{
 
 use crate::engine::{PairLooming, ThreatLevel};
 use crate::events::NearMissEvent;
-use crate::messages::{Scan, StampNs};
+use crate::model::{Scan, StampNs};
 
 use super::colour::{self, Rgba};
 

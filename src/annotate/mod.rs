@@ -13,8 +13,8 @@ use prost::Message;
 
 use crate::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
 use crate::events::{EVENT_SCHEMA, EventConfig, EventDetector, NearMissEvent, PairFrame};
+use crate::model::ScanPair;
 use crate::output::OwnChannelSpec;
-use crate::pairing::ScanPair;
 use crate::quality::PairQuality;
 
 pub use self::foxglove::FieldSet;

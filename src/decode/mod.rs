@@ -13,7 +13,7 @@ pub use crate::ros::DecodeError;
 pub use crate::ros::msgs::pointcloud2_from_points;
 pub use pointcloud::{scan_from_foxglove, scan_from_pointcloud2};
 
-use crate::messages::{Decoded, FrameTransform, ImuSample, VelocitySample, VelocitySourceKind};
+use crate::model::{Decoded, FrameTransform, ImuSample, VelocitySample, VelocitySourceKind};
 use crate::ros::cdr::{CdrReader, Ros1Reader, WireRead};
 use crate::ros::msgs::{Imu, Odometry, PointCloud2, RosMessage, TFMessage, TwistStamped};
 use pointcloud::normalize_frame_id;

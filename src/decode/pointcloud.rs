@@ -9,8 +9,8 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::DecodeLimits;
-use crate::engine::layout::{DroppedRingField, RingSource, ScanLayout};
-use crate::messages::{Scan, StampNs};
+use crate::model::{DroppedRingField, RingSource, ScanLayout};
+use crate::model::{Scan, StampNs};
 use crate::ros::DecodeError;
 use crate::ros::msgs::{PointCloud2, datatype};
 

@@ -22,7 +22,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use rayon::prelude::*;
 
 use super::grid::{ImageGeometry, NO_POINT, RangeImage};
-use crate::messages::Scan;
+use crate::model::Scan;
 
 /// Columns on each side of a cell in the window of the rows beside it.
 const HALF_COLS: usize = 3;

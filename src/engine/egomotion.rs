@@ -21,7 +21,7 @@ use nalgebra::{Matrix6, Vector3, Vector6};
 
 use super::surface::Surfaces;
 use super::warp::Rendered;
-use crate::messages::StampNs;
+use crate::model::StampNs;
 
 /// What was estimated for a pair, in the LiDAR frame at the current scan.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]

@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use std::f64::consts::{PI, TAU};
 
-use crate::messages::Scan;
+use crate::model::Scan;
 
 use super::beams::BeamTable;
 

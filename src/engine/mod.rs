@@ -32,8 +32,8 @@ mod window_sums;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use crate::messages::{Scan, StampNs};
-use crate::pairing::{PairMotion, ScanPair};
+use crate::model::{PairMotion, ScanPair};
+use crate::model::{Scan, StampNs};
 
 pub use grid::{ImageGeometry, NO_POINT, RangeImage};
 pub use threat::{ThreatLevel, ThreatSphere};
@@ -504,7 +504,7 @@ fn with_constant_motion(
     end_ns: StampNs,
 ) -> PairMotion {
     let constant = |value: Vector3<f64>| {
-        crate::pairing::TimeSeries::new(vec![(start_ns, value), (end_ns, value)], 1.0)
+        crate::model::TimeSeries::new(vec![(start_ns, value), (end_ns, value)], 1.0)
     };
     PairMotion {
         velocity: Some(

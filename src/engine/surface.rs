@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use super::grid::{ImageGeometry, NO_POINT, RangeImage};
 use super::window_extremes::RowExtremes;
 use super::window_sums::{Moments, RowSums, column_spans};
-use crate::messages::Scan;
+use crate::model::Scan;
 
 /// Per cell of one image.
 #[derive(Debug, Clone)]

@@ -4,8 +4,8 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::messages::StampNs;
-use crate::pairing::PairMotion;
+use crate::model::PairMotion;
+use crate::model::StampNs;
 
 /// Integration step, ns.
 const STEP_NS: i64 = 1_000_000;

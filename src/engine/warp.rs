@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use super::grid::{ImageGeometry, wrap_col};
 use super::surface::Surfaces;
 use super::trajectory::Trajectory;
-use crate::messages::StampNs;
+use crate::model::StampNs;
 
 /// One scan's surface, ready to be warped.
 pub struct Source<'a> {

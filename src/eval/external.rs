@@ -7,7 +7,7 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use crate::decode::{self, DecodeLimits};
 use crate::input::{Flow, InputFile, InputOptions, InputRecord};
-use crate::messages::{Decoded, StampNs};
+use crate::model::{Decoded, StampNs};
 use crate::topics::{TopicOverrides, select};
 
 use super::{EvalError, ScanTruth, TRUTH_POINTS_TOPIC, decode_truth, position_key};

@@ -10,8 +10,8 @@ use std::path::Path;
 
 use crate::engine::{self, EngineConfig, PairLooming};
 use crate::input::{InputFile, InputOptions};
-use crate::messages::{Scan, StampNs};
-use crate::pairing::ScanPair;
+use crate::model::ScanPair;
+use crate::model::{Scan, StampNs};
 use crate::replay::{ReplayError, replay_input};
 use crate::ros::msgs::PointCloud2;
 

@@ -5,7 +5,7 @@
 use nalgebra::Vector3;
 
 use crate::engine::{ImageGeometry, NO_POINT, PairLooming, mask};
-use crate::messages::Scan;
+use crate::model::Scan;
 
 use super::EventConfig;
 use super::corridor::Corridor;

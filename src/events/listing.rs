@@ -85,7 +85,7 @@ pub fn events_table(events: &[NearMissEvent]) -> String {
             out,
             "{:>4}  {:>22}  {:>7.2}  {:>8.2}  {:>8.3}  {:>8.1}  {:>8.1}  {:>7.2}  {:>6}  {:>7}  {:>6}",
             e.id,
-            crate::pipeline::format_log_time(e.start_log_time_ns),
+            crate::model::format_log_time(e.start_log_time_ns),
             e.duration_s,
             e.min_time_to_contact_s,
             e.peak_looming_per_s,

@@ -13,8 +13,8 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::engine::{ImageGeometry, PairLooming};
-use crate::messages::Scan;
-use crate::pairing::ScanPair;
+use crate::model::Scan;
+use crate::model::ScanPair;
 
 pub use cluster::{Cluster, ColSpan, hot_clusters};
 pub use corridor::{Corridor, PathSource};

@@ -4,10 +4,10 @@
 use serde::Serialize;
 
 use super::OwnChannelSpec;
-use crate::engine::layout::{RingSource, ScanLayout, TimeSource};
-use crate::messages::Scan;
-use crate::pairing::ScanPair;
-use crate::pairing::frames::ExtrinsicInfo;
+use crate::model::ExtrinsicInfo;
+use crate::model::Scan;
+use crate::model::ScanPair;
+use crate::model::{RingSource, ScanLayout, TimeSource};
 use crate::quality::PairQuality;
 
 pub const PAIRS_TOPIC: &str = "/looming/pairs";

@@ -9,7 +9,7 @@ use std::str::FromStr;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
-use crate::messages::FrameTransform;
+use crate::model::{ExtrinsicInfo, ExtrinsicSource, FrameTransform};
 
 /// Frame ids are compared without a leading '/': ROS 1 logs often write
 /// "/base_link" where ROS 2 logs write "base_link", and both mean the same frame.
@@ -91,44 +91,6 @@ impl TransformTree {
         }
         chain
     }
-}
-
-/// Where an extrinsic (`motion_from_lidar`) came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ExtrinsicSource {
-    /// The `--extrinsic` command-line value.
-    Cli,
-    /// Looked up in the `/tf_static` tree.
-    TfStatic,
-    /// The motion samples are already in the LiDAR frame: identity, exactly.
-    SameFrame,
-    /// Frames differ and nothing connects them: identity, assumed (warned once).
-    IdentityAssumed,
-}
-
-impl ExtrinsicSource {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Cli => "cli",
-            Self::TfStatic => "tf_static",
-            Self::SameFrame => "same_frame",
-            Self::IdentityAssumed => "identity_assumed",
-        }
-    }
-}
-
-/// The pose of the LiDAR (the scan points' origin) in a motion-sample frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ExtrinsicInfo {
-    /// The scan's `frame_id`, normalised.
-    pub lidar_frame: String,
-    /// The velocity / IMU sample's `frame_id`, normalised.
-    pub motion_frame: String,
-    /// Maps LiDAR-point coordinates into the motion frame; its translation is
-    /// the LiDAR origin in the motion frame (the lever arm).
-    pub motion_from_lidar: Isometry3<f64>,
-    pub source: ExtrinsicSource,
 }
 
 /// Resolves `motion_from_lidar` by priority: CLI value, equal frames, `/tf_static`,

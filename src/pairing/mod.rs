@@ -28,14 +28,17 @@ use std::sync::Arc;
 use nalgebra::Isometry3;
 
 pub use frames::{
-    Extrinsic, ExtrinsicInfo, ExtrinsicParseError, ExtrinsicSource, TransformTree,
-    normalize_frame_id, parse_extrinsic, resolve_extrinsic,
+    Extrinsic, ExtrinsicParseError, TransformTree, normalize_frame_id, parse_extrinsic,
+    resolve_extrinsic,
 };
-pub use motion::{AngularSource, MotionSample, PairMotion, TimeSeries};
 
-use crate::engine::layout::{self, ScanLayout};
-use crate::messages::{Decoded, FrameTransform, ImuSample, Scan, StampNs, VelocitySample};
-use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion, seconds_to_ns};
+use crate::engine::layout;
+use crate::model::motion::seconds_to_ns;
+use crate::model::{
+    Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan,
+    ScanLayout, ScanPair, StampNs, VelocitySample,
+};
+use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion};
 
 /// Accepted dts kept for the running median that stands in for the nominal
 /// period when none is set: enough to ride out dropped scans, bounded.
@@ -86,20 +89,6 @@ impl Default for PairingConfig {
             motion_hold_s: 0.2,
         }
     }
-}
-
-/// Two consecutive scans and the ego motion between them.
-#[derive(Debug, Clone)]
-pub struct ScanPair {
-    pub previous: Arc<Scan>,
-    pub current: Arc<Scan>,
-    pub motion: PairMotion,
-    /// `current.stamp_ns - previous.stamp_ns`, seconds; always > 0.
-    pub dt_s: f64,
-    pub previous_log_time_ns: u64,
-    pub current_log_time_ns: u64,
-    /// 0-based sequence number of emitted pairs.
-    pub index: u64,
 }
 
 // Pairs are the common variant (one per scan, ~10 Hz) and move by value once;

@@ -1,7 +1,7 @@
 //! State-machine and policy tests for [`ScanPairer`].
 
 use super::*;
-use crate::messages::VelocitySourceKind;
+use crate::model::{AngularSource, ExtrinsicSource, VelocitySourceKind};
 use nalgebra::Vector3;
 
 const MS: i64 = 1_000_000;
@@ -24,7 +24,7 @@ fn scan_with(
         input_point_count: point_count as u32,
         skipped_invalid_points: 0,
         organized: None,
-        layout: crate::messages::ScanLayout::default(),
+        layout: crate::model::ScanLayout::default(),
     })
 }
 

@@ -178,11 +178,11 @@ pub fn synthesize_with(
 
 /// A scan pair straight from the simulator, with the exact LiDAR motion as its
 /// motion series (no MCAP round trip): for benchmarks and engine tests.
-pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::pairing::ScanPair {
+pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::model::ScanPair {
     use std::sync::Arc;
 
-    use crate::pairing::{AngularSource, PairMotion, TimeSeries};
-    let to_scan = |scan: &sensor::SimScan| crate::messages::Scan {
+    use crate::model::{AngularSource, PairMotion, TimeSeries};
+    let to_scan = |scan: &sensor::SimScan| crate::model::Scan {
         stamp_ns: messages::stamp_ns(scan.stamp_s),
         frame_id: messages::LIDAR_FRAME.into(),
         sensor_pose: nalgebra::Isometry3::identity(),
@@ -194,7 +194,7 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::pa
         input_point_count: scan.points.len() as u32,
         skipped_invalid_points: 0,
         organized: None,
-        layout: crate::messages::ScanLayout::from_fields(Some("ring"), Some("time")),
+        layout: crate::model::ScanLayout::from_fields(Some("ring"), Some("time")),
     };
     let (previous, current) = (world.scan(index, seed), world.scan(index + 1, seed));
     let (from_s, to_s) = (
@@ -215,7 +215,7 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::pa
             lidar.to_lidar(&lidar.angular_velocity_world_radps),
         ));
     }
-    crate::pairing::ScanPair {
+    crate::model::ScanPair {
         dt_s: world.period_s,
         previous_log_time_ns: 0,
         current_log_time_ns: 0,

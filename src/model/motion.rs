@@ -1,0 +1,211 @@
+//! The ego motion a scan pair carries, already in the LiDAR frame: time series
+//! the engine queries at per-point times, and where the extrinsics came from.
+
+use nalgebra::{Isometry3, Vector3};
+
+use super::scan::StampNs;
+
+/// Between two samples further apart than this (or than twice the hold, if
+/// larger) the series does not interpolate: a source dropout is not bridged by
+/// a straight line, only held from each side for the hold tolerance.
+pub const MIN_INTERPOLATION_GAP_S: f64 = 1.0;
+
+/// A vector-valued time series, sorted by stamp, with linear interpolation
+/// between samples and a bounded hold beyond them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeSeries {
+    samples: Vec<(StampNs, Vector3<f64>)>,
+    hold_ns: i64,
+    max_interpolation_gap_ns: i64,
+}
+
+impl TimeSeries {
+    /// `hold_s`: how far before the first / after the last sample (or beyond
+    /// an un-bridged dropout) the nearest sample is still used.
+    pub fn new(mut samples: Vec<(StampNs, Vector3<f64>)>, hold_s: f64) -> Self {
+        // Stable: samples with equal stamps keep arrival order (the later wins below).
+        samples.sort_by_key(|(stamp_ns, _)| *stamp_ns);
+        let hold_ns = seconds_to_ns(hold_s.max(0.0));
+        let max_interpolation_gap_ns =
+            seconds_to_ns(MIN_INTERPOLATION_GAP_S).max(hold_ns.saturating_mul(2));
+        Self {
+            samples,
+            hold_ns,
+            max_interpolation_gap_ns,
+        }
+    }
+
+    pub fn samples(&self) -> &[(StampNs, Vector3<f64>)] {
+        &self.samples
+    }
+
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Value at `stamp_ns`; `None` when no sample is close enough.
+    pub fn at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
+        let after_index = self.samples.partition_point(|(t, _)| *t <= stamp_ns);
+        self.around(stamp_ns, after_index)
+    }
+
+    /// [`at`](Self::at), finding the samples around `stamp_ns` by walking
+    /// from `*hint` (the last call's, left there for the next) instead of by
+    /// bisection: the same value, in a step or none where calls come in time
+    /// order or close to it (every cell of a pair asks).
+    pub fn at_near(&self, stamp_ns: StampNs, hint: &mut usize) -> Option<Vector3<f64>> {
+        let samples = &self.samples;
+        let mut after_index = (*hint).min(samples.len());
+        while after_index < samples.len() && samples[after_index].0 <= stamp_ns {
+            after_index += 1;
+        }
+        while after_index > 0 && samples[after_index - 1].0 > stamp_ns {
+            after_index -= 1;
+        }
+        *hint = after_index;
+        self.around(stamp_ns, after_index)
+    }
+
+    /// The value at `stamp_ns` from the samples before and after
+    /// `after_index` (the first sample stamped after it).
+    fn around(&self, stamp_ns: StampNs, after_index: usize) -> Option<Vector3<f64>> {
+        let before = after_index.checked_sub(1).map(|i| self.samples[i]);
+        let after = self.samples.get(after_index).copied();
+        match (before, after) {
+            (Some((t_before, v_before)), _) if t_before == stamp_ns => Some(v_before),
+            (Some((t_before, v_before)), Some((t_after, v_after)))
+                if t_after - t_before <= self.max_interpolation_gap_ns =>
+            {
+                let fraction = (stamp_ns - t_before) as f64 / (t_after - t_before) as f64;
+                Some(v_before + (v_after - v_before) * fraction)
+            }
+            _ => {
+                let near_before = before.filter(|(t, _)| stamp_ns - t <= self.hold_ns);
+                let near_after = after.filter(|(t, _)| t - stamp_ns <= self.hold_ns);
+                match (near_before, near_after) {
+                    (Some((t_b, v_b)), Some((t_a, v_a))) => {
+                        Some(if stamp_ns - t_b <= t_a - stamp_ns {
+                            v_b
+                        } else {
+                            v_a
+                        })
+                    }
+                    (Some((_, v)), None) | (None, Some((_, v))) => Some(v),
+                    (None, None) => None,
+                }
+            }
+        }
+    }
+}
+
+pub(crate) fn seconds_to_ns(seconds: f64) -> i64 {
+    (seconds * 1e9).round() as i64
+}
+
+/// Ego motion of the LiDAR at one instant, in the LiDAR frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionSample {
+    pub stamp_ns: StampNs,
+    pub velocity_lidar_mps: Vector3<f64>,
+    pub angular_velocity_lidar_radps: Vector3<f64>,
+}
+
+/// Which measurement the angular velocity came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AngularSource {
+    /// IMU gyro (preferred).
+    Imu,
+    /// Angular part of the velocity twist (no IMU samples for this pair).
+    Twist,
+    Unavailable,
+}
+
+/// Ego motion covering a scan pair, already in the LiDAR frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PairMotion {
+    /// Translation velocity of the LiDAR origin, LiDAR frame, m/s. `None` when
+    /// there is no velocity source or no sample near the pair.
+    pub velocity: Option<TimeSeries>,
+    /// Angular velocity of the LiDAR, LiDAR frame, rad/s.
+    pub angular: Option<TimeSeries>,
+    pub angular_source: AngularSource,
+    /// LiDAR pose in the velocity samples' frame, when velocity samples were used.
+    pub velocity_extrinsic: Option<ExtrinsicInfo>,
+    /// LiDAR pose in the IMU frame, when IMU samples were used.
+    pub imu_extrinsic: Option<ExtrinsicInfo>,
+    /// No velocity source, or no velocity sample near this pair.
+    pub velocity_unavailable: bool,
+    /// No IMU source, or no IMU sample near this pair (angular from the twist if any).
+    pub imu_unavailable: bool,
+    /// Every existing source had delivered a sample stamped at or after the
+    /// current scan's end when the pair was emitted. `false` means the pair was
+    /// flushed early (next scan arrived, or end of log) and the tail is held.
+    pub coverage_complete: bool,
+}
+
+impl PairMotion {
+    pub fn velocity_at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
+        self.velocity.as_ref()?.at(stamp_ns)
+    }
+
+    /// [`velocity_at`](Self::velocity_at) by [`TimeSeries::at_near`].
+    pub fn velocity_near(&self, stamp_ns: StampNs, hint: &mut usize) -> Option<Vector3<f64>> {
+        self.velocity.as_ref()?.at_near(stamp_ns, hint)
+    }
+
+    pub fn angular_velocity_at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
+        self.angular.as_ref()?.at(stamp_ns)
+    }
+
+    /// Both quantities at once, when both are available.
+    pub fn motion_at(&self, stamp_ns: StampNs) -> Option<MotionSample> {
+        Some(MotionSample {
+            stamp_ns,
+            velocity_lidar_mps: self.velocity_at(stamp_ns)?,
+            angular_velocity_lidar_radps: self.angular_velocity_at(stamp_ns)?,
+        })
+    }
+}
+
+/// Where an extrinsic (`motion_from_lidar`) came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtrinsicSource {
+    /// The `--extrinsic` command-line value.
+    Cli,
+    /// Looked up in the `/tf_static` tree.
+    TfStatic,
+    /// The motion samples are already in the LiDAR frame: identity, exactly.
+    SameFrame,
+    /// Frames differ and nothing connects them: identity, assumed (warned once).
+    IdentityAssumed,
+}
+
+impl ExtrinsicSource {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Cli => "cli",
+            Self::TfStatic => "tf_static",
+            Self::SameFrame => "same_frame",
+            Self::IdentityAssumed => "identity_assumed",
+        }
+    }
+}
+
+/// The pose of the LiDAR (the scan points' origin) in a motion-sample frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExtrinsicInfo {
+    /// The scan's `frame_id`, normalised.
+    pub lidar_frame: String,
+    /// The velocity / IMU sample's `frame_id`, normalised.
+    pub motion_frame: String,
+    /// Maps LiDAR-point coordinates into the motion frame; its translation is
+    /// the LiDAR origin in the motion frame (the lever arm).
+    pub motion_from_lidar: Isometry3<f64>,
+    pub source: ExtrinsicSource,
+}
