@@ -26,19 +26,24 @@ fn main() {
     let mut done = 0;
     // Rings and times the clouds lack come from the engine's front end
     // (`engine::layout`), which runs in the pairer as in `process`.
-    looming::replay::replay(std::path::Path::new(path), &mut |_| {}, &mut |pair| {
-        if done >= max_pairs {
-            return;
-        }
-        done += 1;
-        let started = std::time::Instant::now();
-        let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
-            println!("pair {}: no image", pair.index);
-            return;
-        };
-        let ms = started.elapsed().as_secs_f64() * 1e3;
-        totals.add(&pair.current, &result, ms);
-    })
+    looming::pipeline::replay(
+        std::path::Path::new(path),
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            if done >= max_pairs {
+                return;
+            }
+            done += 1;
+            let started = std::time::Instant::now();
+            let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
+                println!("pair {}: no image", pair.index);
+                return;
+            };
+            let ms = started.elapsed().as_secs_f64() * 1e3;
+            totals.add(&pair.current, &result, ms);
+        },
+    )
     .expect("a readable log");
     totals.print();
 }

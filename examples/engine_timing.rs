@@ -6,11 +6,16 @@ use std::time::Instant;
 fn main() {
     let path = std::env::args().nth(1).expect("LOG.mcap");
     let mut pairs = Vec::new();
-    looming::replay::replay(std::path::Path::new(&path), &mut |_| {}, &mut |pair| {
-        if pairs.len() < 6 {
-            pairs.push(pair);
-        }
-    })
+    looming::pipeline::replay(
+        std::path::Path::new(&path),
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            if pairs.len() < 6 {
+                pairs.push(pair);
+            }
+        },
+    )
     .expect("a readable log");
     let config = looming::engine::EngineConfig::default();
     let mut cache = looming::engine::EngineCache::default();

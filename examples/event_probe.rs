@@ -50,36 +50,47 @@ fn main() {
     let mut cache = EngineCache::default();
     let mut detector = EventDetector::new(config.clone());
     let mut events = Vec::new();
-    looming::replay::replay(&path, &mut |_| {}, &mut |pair| {
-        let Some(looming) = compute_with_cache(&pair, &engine, &mut cache) else {
-            return;
-        };
-        let t_s = (pair.current.stamp_ns - START_NS) as f64 * 1e-9;
-        let stamp = pair.current.stamp_ns;
-        let corridor = Corridor::new(
-            pair.motion.velocity_at(stamp),
-            pair.motion.angular_velocity_at(stamp),
-            wide.corridor_half_width_m,
-        );
-        let clusters: Vec<String> = hot_clusters(&looming, &pair.current, &corridor, &wide, 2)
-            .iter()
-            .map(|c| {
-                let (az, el) = c.bearing_deg();
-                format!(
-                    "[{} cells L {:.2} r {:.1} az {:.1} el {:.1} lateral {:.2} moving {}]",
-                    c.cells, c.looming_per_s, c.range_m, az, el, c.lateral_offset_m, c.moving_cells
-                )
-            })
-            .collect();
-        if !clusters.is_empty() {
-            let min_cells = default_min_cells(&looming.geometry);
-            println!("{t_s:5.2} (min {min_cells}) {}", clusters.join(" "));
-        }
-        events.extend(detector.observe(&PairFrame {
-            pair: &pair,
-            looming: &looming,
-        }));
-    })
+    looming::pipeline::replay(
+        &path,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let Some(looming) = compute_with_cache(&pair, &engine, &mut cache) else {
+                return;
+            };
+            let t_s = (pair.current.stamp_ns - START_NS) as f64 * 1e-9;
+            let stamp = pair.current.stamp_ns;
+            let corridor = Corridor::new(
+                pair.motion.velocity_at(stamp),
+                pair.motion.angular_velocity_at(stamp),
+                wide.corridor_half_width_m,
+            );
+            let clusters: Vec<String> = hot_clusters(&looming, &pair.current, &corridor, &wide, 2)
+                .iter()
+                .map(|c| {
+                    let (az, el) = c.bearing_deg();
+                    format!(
+                        "[{} cells L {:.2} r {:.1} az {:.1} el {:.1} lateral {:.2} moving {}]",
+                        c.cells,
+                        c.looming_per_s,
+                        c.range_m,
+                        az,
+                        el,
+                        c.lateral_offset_m,
+                        c.moving_cells
+                    )
+                })
+                .collect();
+            if !clusters.is_empty() {
+                let min_cells = default_min_cells(&looming.geometry);
+                println!("{t_s:5.2} (min {min_cells}) {}", clusters.join(" "));
+            }
+            events.extend(detector.observe(&PairFrame {
+                pair: &pair,
+                looming: &looming,
+            }));
+        },
+    )
     .unwrap();
     events.extend(detector.finish());
     for e in &events {

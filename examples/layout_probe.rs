@@ -100,20 +100,25 @@ fn report(scan: &Scan) {
 fn main() {
     let path = std::env::args().nth(1).expect("log");
     let mut first = true;
-    looming::replay::replay(std::path::Path::new(&path), &mut |_| {}, &mut |pair| {
-        let scans: Vec<Arc<Scan>> = if first {
-            vec![pair.previous.clone(), pair.current.clone()]
-        } else {
-            vec![pair.current.clone()]
-        };
-        first = false;
-        for s in scans {
-            if std::env::var("STARTS").is_ok() {
-                starts(&s);
+    looming::pipeline::replay(
+        std::path::Path::new(&path),
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let scans: Vec<Arc<Scan>> = if first {
+                vec![pair.previous.clone(), pair.current.clone()]
+            } else {
+                vec![pair.current.clone()]
+            };
+            first = false;
+            for s in scans {
+                if std::env::var("STARTS").is_ok() {
+                    starts(&s);
+                }
+                report(&s);
             }
-            report(&s);
-        }
-    })
+        },
+    )
     .expect("replay");
 }
 

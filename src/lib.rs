@@ -22,7 +22,7 @@ pub mod pipeline;
 pub mod quality;
 pub mod quality_report;
 pub mod render;
-pub mod replay;
+
 pub mod ros;
 pub mod ros_schemas;
 pub mod synth;

@@ -15,9 +15,9 @@ use image::{ImageEncoder, Rgb, RgbImage};
 
 use crate::annotate::colour;
 use crate::engine::{self, EngineConfig, NO_POINT, PairLooming};
-use crate::input::{InputError, InputFile, InputOptions};
+use crate::input::{InputError, InputFile};
 use crate::model::ScanPair;
-use crate::replay::{ReplayError, replay_input};
+use crate::pipeline::{ReplayError, ScanOptions, replay_input};
 
 /// What a pixel shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -75,6 +75,8 @@ pub struct RenderOptions {
     pub top_size_px: u32,
     /// Replace an existing output.
     pub force: bool,
+    /// How the log is read, decoded and paired (as `process` would).
+    pub scans: ScanOptions,
 }
 
 impl Default for RenderOptions {
@@ -89,6 +91,7 @@ impl Default for RenderOptions {
             top_extent_m: 40.0,
             top_size_px: 800,
             force: false,
+            scans: ScanOptions::default(),
         }
     }
 }
@@ -173,14 +176,14 @@ pub fn render(options: &RenderOptions) -> Result<RenderSummary, RenderError> {
             path: options.output.clone(),
         });
     }
-    let input = InputFile::open(&options.input, InputOptions::default())?;
+    let input = InputFile::open(&options.input, options.scans.input_options.clone())?;
     let start_ns = input.catalog().start_ns;
     let wanted = Wanted::new(options.at, start_ns);
     let mut chosen: Option<ScanPair> = None;
     let mut pairs = 0u64;
     // The callback API reads the whole log; pairs after the chosen one are
     // only counted (the engine runs once).
-    replay_input(&input, &mut |_| {}, &mut |pair| {
+    replay_input(&input, &options.scans, &mut |_| {}, &mut |pair| {
         pairs += 1;
         if chosen.is_none() && wanted.matches(&pair) {
             chosen = Some(pair);

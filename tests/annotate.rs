@@ -135,11 +135,16 @@ fn close_to_input(written: [f32; 3], input: [f32; 3]) -> bool {
 fn engine_results(input: &Path) -> BTreeMap<u64, (ScanPair, PairLooming)> {
     let mut cache = EngineCache::default();
     let mut results = BTreeMap::new();
-    looming::replay::replay(input, &mut |_| {}, &mut |pair| {
-        if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
-            results.insert(pair.current_log_time_ns, (pair, result));
-        }
-    })
+    looming::pipeline::replay(
+        input,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
+                results.insert(pair.current_log_time_ns, (pair, result));
+            }
+        },
+    )
     .unwrap();
     results
 }

@@ -255,7 +255,13 @@ fn the_motion_is_estimated_from_the_static_world_where_no_source_measured_it() {
     let log = dir.join("turn.mcap");
     synthesize_drive("urban-turn", &log, (0.0, 1.0), (32, 512));
     let mut pairs = Vec::new();
-    looming::replay::replay(&log, &mut |_| {}, &mut |pair| pairs.push(pair)).unwrap();
+    looming::pipeline::replay(
+        &log,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| pairs.push(pair),
+    )
+    .unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     assert!(pairs.len() >= 8, "{} pairs", pairs.len());
     let config = EngineConfig::default();

@@ -243,11 +243,16 @@ fn run(args: &[&str]) -> String {
 fn engine_results(path: &Path) -> BTreeMap<i64, (Scan, PairLooming)> {
     let mut cache = EngineCache::default();
     let mut results = BTreeMap::new();
-    looming::replay::replay(path, &mut |_| {}, &mut |pair| {
-        if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
-            results.insert(pair.current.stamp_ns, ((*pair.current).clone(), result));
-        }
-    })
+    looming::pipeline::replay(
+        path,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
+                results.insert(pair.current.stamp_ns, ((*pair.current).clone(), result));
+            }
+        },
+    )
     .unwrap();
     results
 }

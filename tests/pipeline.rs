@@ -626,3 +626,79 @@ fn an_already_processed_log_is_refused() {
         stderr(&again)
     );
 }
+
+/// `eval` and `render` read, decode and pair a log with the code and the
+/// options `process` uses: the same pairs, the same bad messages counted.
+#[test]
+fn eval_and_render_pair_scans_as_process_does() {
+    let dir = scratch("same-pairing");
+    let input = log_with_bad_messages();
+    // A gap limit below the 0.2 s the bad scan leaves: the 2-4 pair is
+    // skipped, which default options would have paired.
+    let options = ["--max-gap", "0.15", "--extrinsic", "0,0,0,0,0,0,1"];
+    let (summary, _, _) = process(&dir, &input, &options);
+    let process_pairs = summary["pairs_written"].as_u64().unwrap();
+    assert_eq!(process_pairs, SCANS as u64 - 3);
+    assert_eq!(summary["bad_messages"], 2);
+
+    // The library's replay (what eval and render call) with the same options.
+    let scans = looming::pipeline::ScanOptions {
+        pairing: looming::pairing::PairingConfig {
+            max_gap_s: Some(0.15),
+            cli_extrinsic: Some(nalgebra::Isometry3::identity()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut sources = Vec::new();
+    let report = looming::pipeline::replay(&dir.join("in.mcap"), &scans, &mut |_| {}, &mut |p| {
+        sources.push(p.motion.velocity_extrinsic.map(|e| e.source))
+    })
+    .unwrap();
+    assert_eq!(report.pairs, process_pairs);
+    assert_eq!(report.bad_messages.count, 2);
+    assert_eq!(
+        report.bad_messages.by_topic,
+        serde_json::from_value(summary["bad_messages_by_topic"].clone()).unwrap()
+    );
+    assert_eq!(report.pairing.skipped_gap, summary["pairing"]["skipped_gap"]);
+    assert!(
+        sources
+            .iter()
+            .all(|s| *s == Some(looming::model::ExtrinsicSource::Cli))
+    );
+
+    // `render` through the CLI: asking for a pair past the end names the count.
+    let input_path = dir.join("in.mcap");
+    let png = dir.join("render.png");
+    let mut args = vec![
+        "render",
+        input_path.to_str().unwrap(),
+        "--frame",
+        "1000",
+        "-o",
+        png.to_str().unwrap(),
+    ];
+    args.extend_from_slice(&options);
+    let run = looming(&args);
+    assert_eq!(run.status.code(), Some(2));
+    let expected = format!("(the log has {process_pairs} pairs)");
+    assert!(stderr(&run).contains(&expected), "{}", stderr(&run));
+    // ... and with --strict, the bad message stops it as it stops process.
+    args.push("--strict");
+    let run = looming(&args);
+    assert!(!run.status.success());
+    assert!(stderr(&run).contains("topic"), "{}", stderr(&run));
+}
+
+/// `eval` through the CLI honours the pairing options too.
+#[test]
+fn eval_takes_the_pairing_options_of_process() {
+    let log = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let run = looming(&["eval", log.to_str().unwrap(), "--max-gap", "0.05"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let text = String::from_utf8_lossy(&run.stdout).to_string();
+    assert!(text.contains(": 0 pairs (0 with ego velocity)"), "{text}");
+    let run = looming(&["eval", log.to_str().unwrap(), "--max-gap", "-1"]);
+    assert_eq!(run.status.code(), Some(2));
+}

@@ -41,7 +41,13 @@ fn synth_log() -> (tempfile::TempDir, PathBuf) {
 /// Every pair of the log, by replay.
 fn pairs(path: &Path) -> Vec<ScanPair> {
     let mut pairs = Vec::new();
-    looming::replay::replay(path, &mut |_| {}, &mut |pair| pairs.push(pair)).unwrap();
+    looming::pipeline::replay(
+        path,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| pairs.push(pair),
+    )
+    .unwrap();
     pairs
 }
 
@@ -56,6 +62,7 @@ fn options(input: &Path, output: PathBuf, channel: RenderChannel, at: RenderAt) 
         top_extent_m: 40.0,
         top_size_px: 800,
         force: false,
+        scans: looming::pipeline::ScanOptions::default(),
     }
 }
 

@@ -42,10 +42,10 @@ impl TruthCursor {
 }
 
 /// Run `evaluate` with a cursor over the truth of `truth_path`.
-pub fn with_truth_of(
+pub fn with_truth_of<T>(
     truth_path: &Path,
-    evaluate: impl FnOnce(&mut TruthCursor) -> Result<(), EvalError>,
-) -> Result<(), EvalError> {
+    evaluate: impl FnOnce(&mut TruthCursor) -> Result<T, EvalError>,
+) -> Result<T, EvalError> {
     let input = InputFile::open(truth_path, InputOptions::default())?;
     let (tx, rx) = sync_channel(READ_AHEAD);
     std::thread::scope(|scope| {
@@ -55,8 +55,8 @@ pub fn with_truth_of(
         // The reader stops at its next send once the cursor is gone.
         drop(cursor);
         let read = reader.join().map_err(|_| EvalError::Internal)?;
-        evaluated?;
-        read
+        let evaluated = evaluated?;
+        read.map(|()| evaluated)
     })
 }
 

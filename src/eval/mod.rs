@@ -9,10 +9,10 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use crate::engine::{self, EngineConfig, PairLooming};
-use crate::input::{InputFile, InputOptions};
+use crate::input::InputFile;
 use crate::model::ScanPair;
 use crate::model::{Scan, StampNs};
-use crate::replay::{ReplayError, replay_input};
+use crate::pipeline::{ReplayError, ReplayReport, ScanOptions, replay_input};
 use crate::ros::msgs::PointCloud2;
 
 pub const TRUTH_POINTS_TOPIC: &str = "/truth/points";
@@ -38,6 +38,9 @@ pub enum EvalError {
     Truth(String),
     #[error("truth reader thread failed")]
     Internal,
+    /// `strict` and the log had a bad message or was truncated.
+    #[error("{0}")]
+    Strict(String),
 }
 
 /// The truth of one scan: per input point index, and, when the truth comes
@@ -255,6 +258,14 @@ pub struct EvalReport {
     pub errors: BTreeMap<String, BTreeMap<String, Summary>>,
     pub moving_detection: Detection,
     pub observable_motion_threshold_per_s: f64,
+    /// Messages of the selected topics that failed to decode: skipped and
+    /// counted, as `process` does (absent from the JSON when none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub bad_messages: u64,
+}
+
+fn is_zero(count: &u64) -> bool {
+    *count == 0
 }
 
 #[derive(Default)]
@@ -388,24 +399,26 @@ impl Accumulator {
 
 /// Evaluate the engine on `path` with `config`, against the log's own truth.
 pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalError> {
-    evaluate_against(path, config, None)
+    evaluate_against(path, config, None, &ScanOptions::default())
 }
 
 /// Evaluate the engine on `path` with `config`, against the truth of the log
 /// itself or, with `truth_path`, of another log whose LiDAR scans have the
 /// same stamps and points (the synthetic drive a KITTI folder was made from);
-/// its points are matched by their exact positions.
+/// its points are matched by their exact positions. The log is read, decoded
+/// and paired with `scans`, as `process` would with the same options.
 pub fn evaluate_against(
     path: &Path,
     config: &EngineConfig,
     truth_path: Option<&Path>,
+    scans: &ScanOptions,
 ) -> Result<EvalReport, EvalError> {
-    let input = InputFile::open(path, InputOptions::default())?;
+    let input = InputFile::open(path, scans.input_options.clone())?;
     let mut state = EvalState::new(config);
     let outcome = match truth_path {
-        None => own_truth(path, &input, &mut state),
+        None => own_truth(path, &input, scans, &mut state),
         Some(truth_path) => external::with_truth_of(truth_path, |truths| {
-            replay_input(&input, &mut |_| {}, &mut |pair| {
+            replay_input(&input, scans, &mut |_| {}, &mut |pair| {
                 if let Some(truth) = truths.truth_at(pair.current.stamp_ns) {
                     state.evaluate_pair(&pair, &truth);
                 }
@@ -413,20 +426,28 @@ pub fn evaluate_against(
             .map_err(replay_error)
         }),
     };
-    outcome?;
-    Ok(state.report(path))
+    let replayed = outcome?;
+    let mut report = state.report(path);
+    report.bad_messages = replayed.bad_messages.count;
+    Ok(report)
 }
 
 fn replay_error(error: ReplayError) -> EvalError {
     match error {
         ReplayError::Input(e) => EvalError::Input(e),
         ReplayError::Topic { path, source } => EvalError::Topic { path, source },
+        ReplayError::Strict(reason) => EvalError::Strict(reason),
     }
 }
 
 /// Truth from the log's own `/truth/points`: it arrives with its scan, before
 /// the pair that reports on it.
-fn own_truth(path: &Path, input: &InputFile, state: &mut EvalState) -> Result<(), EvalError> {
+fn own_truth(
+    path: &Path,
+    input: &InputFile,
+    scans: &ScanOptions,
+    state: &mut EvalState,
+) -> Result<ReplayReport, EvalError> {
     let truth_channel = input
         .catalog()
         .channels
@@ -436,8 +457,9 @@ fn own_truth(path: &Path, input: &InputFile, state: &mut EvalState) -> Result<()
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
     let truths = std::cell::RefCell::new(BTreeMap::<StampNs, ScanTruth>::new());
     let mut failure: Option<String> = None;
-    replay_input(
+    let replayed = replay_input(
         input,
+        scans,
         &mut |message| {
             if message.channel_id == truth_channel {
                 match decode_truth(&message.data) {
@@ -465,7 +487,7 @@ fn own_truth(path: &Path, input: &InputFile, state: &mut EvalState) -> Result<()
     .map_err(replay_error)?;
     match failure {
         Some(reason) => Err(EvalError::Truth(reason)),
-        None => Ok(()),
+        None => Ok(replayed),
     }
 }
 
@@ -508,6 +530,7 @@ impl<'c> EvalState<'c> {
             errors,
             moving_detection,
             observable_motion_threshold_per_s: OBSERVABLE_MOTION_PER_S,
+            bad_messages: 0,
         }
     }
 }
@@ -522,6 +545,9 @@ impl EvalReport {
             "{}: {} pairs ({} with ego velocity)",
             self.file, self.pairs, self.pairs_with_ego_velocity
         );
+        if self.bad_messages > 0 {
+            let _ = writeln!(out, "{} bad messages skipped", self.bad_messages);
+        }
         let _ = writeln!(
             out,
             "\n{:<16} {:<16} {:>9} {:>10} {:>10} {:>10} {:>10}",

@@ -163,6 +163,20 @@ impl FromStr for Extrinsic {
     }
 }
 
+/// An extrinsic as `x,y,z,qx,qy,qz,qw` (the form [`parse_extrinsic`] reads),
+/// for the run's metadata record.
+pub(crate) fn serialize_extrinsic<S: serde::Serializer>(
+    extrinsic: &Option<Isometry3<f64>>,
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    let text = extrinsic.map(|pose| {
+        let t = pose.translation.vector;
+        let q = pose.rotation.quaternion();
+        format!("{},{},{},{},{},{},{}", t.x, t.y, t.z, q.i, q.j, q.k, q.w)
+    });
+    serde::Serialize::serialize(&text, serializer)
+}
+
 /// See [`Extrinsic`].
 pub fn parse_extrinsic(text: &str) -> Result<Isometry3<f64>, ExtrinsicParseError> {
     let fields: Vec<&str> = text.split(',').map(str::trim).collect();

@@ -61,7 +61,7 @@ pub const MAX_BUFFERED_SAMPLES_PER_SOURCE: usize = 50_000;
 const CLOCK_RESET_FALLBACK_S: f64 = 1.0;
 
 /// Pairing policies.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PairingConfig {
     /// Maximum dt, in nominal periods, for two scans to form a pair.
     pub max_gap_periods: f64,
@@ -69,10 +69,13 @@ pub struct PairingConfig {
     pub max_gap_s: Option<f64>,
     /// `motion_from_lidar` from the command line (LiDAR pose in the
     /// velocity/IMU frame); overrides `/tf_static` for both sources.
+    #[serde(rename = "extrinsic", serialize_with = "frames::serialize_extrinsic")]
     pub cli_extrinsic: Option<Isometry3<f64>>,
     /// A velocity topic exists: pending pairs wait for its samples.
+    #[serde(skip)]
     pub has_velocity_source: bool,
     /// An IMU topic exists: pending pairs wait for its samples.
+    #[serde(skip)]
     pub has_imu_source: bool,
     /// How far motion is held beyond the first/last sample, seconds.
     pub motion_hold_s: f64,

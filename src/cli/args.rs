@@ -1,0 +1,324 @@
+//! Command-line arguments, clap only: the doc comments are the help text.
+//! Values are checked and turned into the library's configuration in
+//! [`super::resolve`].
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use looming::annotate::FieldSet;
+use looming::kitti::SweepDirection;
+use looming::output::OutputCompression;
+use looming::render::{RenderChannel, RenderView};
+
+use super::resolve::parse_threat_ttc;
+
+pub(crate) const EXIT_CODES: &str = "\
+Exit codes:
+  0  success (bad messages, if any, were skipped and are counted in the summary)
+  1  failure: unreadable input, I/O error, output could not be written
+  2  usage: bad arguments, unknown or ambiguous topic, output exists (see --force)
+     or is the input, input already processed
+  3  --strict and the input had a bad message, a bad chunk CRC or was truncated";
+
+pub(crate) const SYNTH_EXIT_CODES: &str = "\
+Exit codes:
+  0  success
+  1  failure: the output could not be written
+  2  usage: bad arguments, unknown or invalid scenario, output exists (see --force)";
+
+/// Looming (inverse time to contact) from LiDAR drive logs in MCAP.
+///
+/// Reads the LiDAR point clouds and IMU / velocity channels of a log, pairs
+/// consecutive scans and writes a new MCAP holding every input record unchanged
+/// plus looming channels.
+#[derive(Debug, Parser)]
+#[command(name = "looming", version, after_help = EXIT_CODES)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum Command {
+    /// Process a log: copy every record and add the /looming/* channels.
+    #[command(after_help = EXIT_CODES)]
+    Process(ProcessArgs),
+    /// Show a log's channels, schemas, counts, rates, time span and the topics
+    /// `process` would use.
+    #[command(after_help = EXIT_CODES)]
+    Inspect(InspectArgs),
+    /// Write a synthetic drive with analytic ground truth (/truth/*) as a ROS 2 MCAP.
+    ///
+    /// Built-in scenarios: straight-road, urban-turn, follow, cut-in, crossing,
+    /// safe-drive (see docs/scenarios.md); or a scenario JSON file.
+    #[command(after_help = SYNTH_EXIT_CODES)]
+    Synth(SynthArgs),
+    /// Measure the engine against ground truth: per quantity and class of cell,
+    /// median / p90 |error| and bias, and moving-object precision / recall / F1.
+    ///
+    /// FILE must carry /truth/points (a `looming synth` drive, processed or
+    /// not), or --truth names a log that does.
+    Eval(EvalArgs),
+    /// List the near-miss events of an annotated log (its /looming/events),
+    /// ranked by minimum time to contact.
+    #[command(after_help = EXIT_CODES)]
+    Events(EventsArgs),
+    /// The quality figures of an annotated log: per scan and in total the
+    /// trusted fraction, the static ground's looming (left and right), |D| on
+    /// static cells, moving cells, range noise, layout and near-miss events,
+    /// with diagnoses (see docs/quality.md).
+    #[command(after_help = EXIT_CODES)]
+    Quality(QualityArgs),
+    /// Convert a KITTI raw drive folder (Velodyne scans, OXTS, calibration) to a
+    /// ROS 2 MCAP that `process` reads (see docs/kitti.md).
+    #[command(name = "import-kitti", after_help = SYNTH_EXIT_CODES)]
+    ImportKitti(ImportKittiArgs),
+    /// Draw a scan pair's looming as a PNG: the range image (rows = beams,
+    /// forward at the centre) or, with --view top, the cloud from above.
+    #[command(after_help = SYNTH_EXIT_CODES)]
+    Render(RenderArgs),
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ImportKittiArgs {
+    /// The drive folder, e.g. 2011_09_26/2011_09_26_drive_0005_sync.
+    pub(crate) drive: PathBuf,
+    /// Folder of calib_imu_to_velo.txt [default: the drive folder's parent,
+    /// the date folder].
+    #[arg(long, value_name = "DIR")]
+    pub(crate) calib: Option<PathBuf>,
+    /// Output MCAP file.
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// Which way the scanner turns seen from above, for per-point times
+    /// (KITTI's HDL-64E: counter-clockwise, measured; see docs/kitti.md).
+    #[arg(long, value_enum, default_value_t = SweepDirection::CounterClockwise)]
+    pub(crate) sweep: SweepDirection,
+    /// Most points accepted in one scan.
+    #[arg(long, value_name = "N", default_value_t = 4_000_000)]
+    pub(crate) max_points: usize,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    pub(crate) force: bool,
+    /// No summary on stderr.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct RenderArgs {
+    /// A log (annotated or not) with LiDAR scans and, for L_ego, a velocity.
+    pub(crate) file: PathBuf,
+    /// The quantity: fused, lidar (L_lidar, the paper's LiDAR-only looming),
+    /// ego (L_ego, its LiDAR + IMU looming), disagreement (D), threat.
+    #[arg(long, value_enum, default_value_t = RenderChannel::Fused)]
+    pub(crate) channel: RenderChannel,
+    /// Seconds after the log's first message: the first pair at or after.
+    #[arg(long, value_name = "SECONDS", conflicts_with = "frame")]
+    pub(crate) time: Option<f64>,
+    /// Pair number (as /looming/pairs counts them, from 0).
+    #[arg(long, value_name = "N")]
+    pub(crate) frame: Option<u64>,
+    /// range: the range image; top: the coloured cloud from above.
+    #[arg(long, value_enum, default_value_t = RenderView::Range)]
+    pub(crate) view: RenderView,
+    /// Range view: pixel rows per beam.
+    #[arg(long, value_name = "PX", default_value_t = 4)]
+    pub(crate) row_height: u32,
+    /// Top view: metres from the centre to the edge.
+    #[arg(long, value_name = "METRES", default_value_t = 40.0)]
+    pub(crate) extent: f64,
+    /// Top view: image size, pixels.
+    #[arg(long, value_name = "PX", default_value_t = 800)]
+    pub(crate) size: u32,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    pub(crate) force: bool,
+    #[command(flatten)]
+    pub(crate) scans: ScanArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct EvalArgs {
+    /// Log with ground truth.
+    pub(crate) file: PathBuf,
+    /// Also write the report as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) json: Option<PathBuf>,
+    /// Difference scans without de-rotating the previous one (to measure what
+    /// rotation compensation buys).
+    #[arg(long)]
+    pub(crate) no_rotation_compensation: bool,
+    /// Take the truth from this log instead (a `looming synth` drive whose
+    /// scans have the same stamps and points, e.g. the one a KITTI-format
+    /// folder was written from); points are matched by exact position.
+    #[arg(long, value_name = "TRUTH.mcap")]
+    pub(crate) truth: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) scans: ScanArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct SynthArgs {
+    /// Built-in scenario name or scenario JSON file.
+    #[arg(long, value_name = "NAME|FILE.json")]
+    pub(crate) scenario: String,
+    /// Output MCAP file.
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// Seed of the range and IMU noise.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Length of the drive, seconds [default: the scenario's].
+    #[arg(long, value_name = "SECONDS")]
+    pub(crate) duration: Option<f64>,
+    /// Write only the part of the drive from this time on, seconds (the
+    /// scenario still starts at 0; stamps keep their times).
+    #[arg(long, value_name = "SECONDS")]
+    pub(crate) start: Option<f64>,
+    /// LiDAR beams [default: the scenario's, 64].
+    #[arg(long)]
+    pub(crate) beams: Option<u16>,
+    /// LiDAR columns per revolution [default: the scenario's, 2048].
+    #[arg(long)]
+    pub(crate) columns: Option<u32>,
+    /// Layout of the LiDAR cloud: ring-time, organized, ring-field:channel,
+    /// ring-field:laser_id[:int32], ring-field:line, laser-order[:kitti],
+    /// firing-order, firing-order-sparse [default: the scenario's, ring-time].
+    #[arg(long, value_name = "NAME", value_parser = clap::value_parser!(looming::synth::CloudLayout))]
+    pub(crate) layout: Option<looming::synth::CloudLayout>,
+    /// zstd level of the output chunks (1-22; higher is smaller and slower)
+    /// [default: 3].
+    #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]
+    pub(crate) compression_level: Option<u32>,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    pub(crate) force: bool,
+    /// No summary on stderr.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ProcessArgs {
+    /// Input MCAP file.
+    pub(crate) input: PathBuf,
+    /// Output MCAP file (written to a temporary file beside it, renamed when complete).
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    pub(crate) force: bool,
+    #[command(flatten)]
+    pub(crate) scans: ScanArgs,
+    /// Chunk compression of the output.
+    #[arg(long, value_enum, default_value_t = OutputCompression::Zstd)]
+    pub(crate) compression: OutputCompression,
+    /// Also write the run summary as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) json_summary: Option<PathBuf>,
+    /// Also write the near-miss events, ranked by minimum time to contact, to
+    /// this JSON file (schema: schemas/looming.NearMissEvents.schema.json).
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) events: Option<PathBuf>,
+    /// Per-point fields of /looming/points: `default` (x, y, z, looming,
+    /// colour) or `full` (adds l_lidar, l_ego, l_ray_ego, disagreement,
+    /// confidence, threat, mask).
+    #[arg(long, value_enum, default_value_t = FieldSet::Default)]
+    pub(crate) fields: FieldSet,
+    /// Accept an input that already holds /looming/* channels: drop them and
+    /// write fresh ones.
+    #[arg(long)]
+    pub(crate) replace: bool,
+    /// Threat levels low, medium, high as times to contact, seconds.
+    #[arg(long, value_name = "LOW,MEDIUM,HIGH", default_value = "3,1.5,1", value_parser = parse_threat_ttc)]
+    pub(crate) threat_ttc: [f64; 3],
+    /// Near-miss threshold as a time to contact, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 1.5)]
+    pub(crate) event_ttc: f64,
+    /// Smallest near-miss cluster, range-image cells [default: the cells a
+    /// 0.3 m square covers at 10 m, at least 3: 40 at 64 x 2048, 5 at 32 x 512].
+    #[arg(long, value_name = "CELLS")]
+    pub(crate) event_min_cells: Option<usize>,
+    /// Consecutive scan pairs a cluster must last to be a near miss.
+    #[arg(long, value_name = "PAIRS", default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) event_min_pairs: u64,
+    /// Half width of the ego corridor in which near misses are sought, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 2.0)]
+    pub(crate) corridor_half_width: f64,
+    /// No progress bar and no summary on stderr.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct EventsArgs {
+    /// An MCAP written by `looming process`.
+    pub(crate) file: PathBuf,
+    /// Print JSON (the events, ranked) instead of a table.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct QualityArgs {
+    /// An MCAP written by `looming process`.
+    pub(crate) file: PathBuf,
+    /// Also write the report as JSON to this file
+    /// (schema: schemas/looming.QualityReport.schema.json).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) json: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct InspectArgs {
+    /// MCAP file to inspect.
+    pub(crate) file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+/// How the log is read, decoded and paired: shared by `process`, `eval` and
+/// `render`, so that all three see the same scan pairs.
+#[derive(Debug, Args)]
+pub(crate) struct ScanArgs {
+    /// Fail on the first bad input message, bad chunk CRC or truncation, instead
+    /// of skipping and counting it.
+    #[arg(long)]
+    pub(crate) strict: bool,
+    /// Check every chunk's CRC before using its messages (otherwise only the
+    /// chunks a pass-through run decompresses are checked; costs a
+    /// decompression of every chunk).
+    #[arg(long)]
+    pub(crate) verify: bool,
+    /// LiDAR topic (sensor_msgs/PointCloud2 or foxglove.PointCloud); auto-detected
+    /// when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    pub(crate) lidar_topic: Option<String>,
+    /// IMU topic (sensor_msgs/Imu); auto-detected when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    pub(crate) imu_topic: Option<String>,
+    /// Velocity topic (geometry_msgs/TwistStamped or nav_msgs/Odometry);
+    /// auto-detected when the log has exactly one.
+    #[arg(long, value_name = "TOPIC")]
+    pub(crate) velocity_topic: Option<String>,
+    /// Pose of the LiDAR in the velocity/IMU frame as x,y,z,qx,qy,qz,qw (metres,
+    /// unit quaternion); overrides /tf_static.
+    #[arg(long, value_name = "X,Y,Z,QX,QY,QZ,QW", allow_hyphen_values = true)]
+    pub(crate) extrinsic: Option<String>,
+    /// Largest stamp gap between two scans that is still paired, seconds
+    /// [default: 3 nominal scan periods].
+    #[arg(long, value_name = "SECONDS")]
+    pub(crate) max_gap: Option<f64>,
+    /// Reorder window for logs read in file order, seconds of log time.
+    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
+    pub(crate) reorder_window: f64,
+    /// Most points accepted in one scan (larger clouds are bad messages).
+    #[arg(long, value_name = "N", default_value_t = 4_000_000)]
+    pub(crate) max_points: usize,
+}

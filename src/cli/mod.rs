@@ -1,0 +1,256 @@
+//! The `looming` command line: arguments ([`args`], clap only), their checks
+//! and the configuration they resolve to ([`resolve`]), what the commands
+//! print ([`report`]), and here the dispatch to the library and the exit
+//! codes. All the work is in the library.
+
+mod args;
+mod report;
+mod resolve;
+
+use looming::output::OutputError;
+use looming::pipeline::ProcessError;
+
+pub use args::Cli;
+use args::{
+    Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, ProcessArgs, QualityArgs,
+    RenderArgs, SynthArgs,
+};
+use report::{Progress, summary_text};
+
+/// An error with its exit code.
+pub struct Failure {
+    pub error: anyhow::Error,
+    pub code: i32,
+}
+
+impl Failure {
+    fn with_code(error: impl Into<anyhow::Error>, code: i32) -> Self {
+        Failure {
+            error: error.into(),
+            code,
+        }
+    }
+}
+
+impl<E: Into<anyhow::Error>> From<E> for Failure {
+    fn from(error: E) -> Self {
+        Failure {
+            error: error.into(),
+            code: 1,
+        }
+    }
+}
+
+/// Run the command.
+pub fn run(cli: Cli) -> Result<(), Failure> {
+    match cli.command {
+        Command::Process(args) => process(args),
+        Command::Inspect(args) => inspect(args),
+        Command::Synth(args) => synth(args),
+        Command::Eval(args) => eval(args),
+        Command::Events(args) => events(args),
+        Command::Quality(args) => quality(args),
+        Command::ImportKitti(args) => import_kitti(args),
+        Command::Render(args) => render(args),
+    }
+}
+
+fn process(args: ProcessArgs) -> Result<(), Failure> {
+    let config = resolve::process_config(&args)?;
+    let progress = Progress::new(args.quiet);
+    let result = looming::pipeline::process(&config, &progress);
+    progress.bar.finish_and_clear();
+    let summary = result.map_err(|error| {
+        let code = match &error {
+            ProcessError::Topic { .. } | ProcessError::AlreadyProcessed { .. } => 2,
+            ProcessError::Output(OutputError::Exists { .. } | OutputError::SameAsInput { .. }) => 2,
+            ProcessError::Strict(_) => 3,
+            _ => 1,
+        };
+        Failure {
+            error: error.into(),
+            code,
+        }
+    })?;
+    if let Some(path) = &args.json_summary {
+        let json = serde_json::to_string_pretty(&summary)?;
+        std::fs::write(path, json).map_err(|e| {
+            anyhow::anyhow!("{}: cannot write the JSON summary: {e}", path.display())
+        })?;
+    }
+    if !args.quiet {
+        eprint!("{}", summary_text(&summary));
+    }
+    Ok(())
+}
+
+fn eval(args: EvalArgs) -> Result<(), Failure> {
+    let config = looming::engine::EngineConfig {
+        rotation_compensation: !args.no_rotation_compensation,
+        ..Default::default()
+    };
+    let scans = resolve::scan_options(&args.scans)?;
+    let report =
+        looming::eval::evaluate_against(&args.file, &config, args.truth.as_deref(), &scans)?;
+    print!("{}", report.to_text());
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .map_err(|e| anyhow::anyhow!("{}: cannot write the report: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn render(args: RenderArgs) -> Result<(), Failure> {
+    let options = resolve::render_options(&args)?;
+    let summary = looming::render::render(&options).map_err(|error| {
+        let code = if error.is_usage() { 2 } else { 1 };
+        Failure::with_code(error, code)
+    })?;
+    eprintln!(
+        "looming render: pair {} (stamp {}), {} x {} px -> {}",
+        summary.pair_index,
+        looming::model::format_log_time(summary.stamp_ns.max(0) as u64),
+        summary.width_px,
+        summary.height_px,
+        summary.output.display()
+    );
+    Ok(())
+}
+
+fn inspect(args: InspectArgs) -> Result<(), Failure> {
+    let report = looming::inspect::inspect(&args.file)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    Ok(())
+}
+
+fn events(args: EventsArgs) -> Result<(), Failure> {
+    let mut events = looming::events::read_events(&args.file)?;
+    looming::events::rank(&mut events);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&events)?);
+    } else {
+        print!("{}", looming::events::events_table(&events));
+    }
+    Ok(())
+}
+
+fn quality(args: QualityArgs) -> Result<(), Failure> {
+    let report = looming::quality_report::read_quality(&args.file).map_err(|error| {
+        let usage = matches!(
+            error,
+            looming::quality_report::QualityError::NotProcessed { .. }
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
+    })?;
+    print!("{}", report.to_text());
+    if let Some(path) = &args.json {
+        let json = serde_json::to_vec_pretty(&report)?;
+        std::fs::write(path, json)
+            .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn synth(args: SynthArgs) -> Result<(), Failure> {
+    let options = looming::synth::SynthOptions {
+        scenario: args.scenario,
+        output: args.output,
+        seed: args.seed,
+        start_s: args.start,
+        duration_s: args.duration,
+        beams: args.beams,
+        columns: args.columns,
+        output_options: looming::output::OutputOptions {
+            force: args.force,
+            compression_level: args.compression_level.unwrap_or(0),
+            ..looming::output::OutputOptions::default()
+        },
+    };
+    let lidar = looming::synth::LidarOverrides {
+        layout: args.layout,
+        realism: None,
+    };
+    let summary = looming::synth::synthesize_with(&options, &lidar).map_err(|error| {
+        let usage = matches!(
+            &error,
+            looming::synth::SynthError::Scenario(_)
+                | looming::synth::SynthError::Output(OutputError::Exists { .. })
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
+    })?;
+    if !args.quiet {
+        eprintln!(
+            "looming synth {}: {} scans, {} points, {} messages, {:.1} MB in {:.2} s -> {}",
+            summary.scenario,
+            summary.scans,
+            summary.points,
+            summary.messages,
+            summary.output_bytes as f64 / 1e6,
+            summary.elapsed_s,
+            summary.output
+        );
+        for event in &summary.events {
+            eprintln!(
+                "  planted near miss: actor {} ({}) {:.2}..{:.2} s, min time to contact {:.2} s",
+                event.actor_id,
+                event.label,
+                event.start_s,
+                event.end_s,
+                event.min_time_to_contact_s
+            );
+        }
+    }
+    Ok(())
+}
+
+fn import_kitti(args: ImportKittiArgs) -> Result<(), Failure> {
+    let options = looming::kitti::ImportOptions {
+        drive_dir: args.drive,
+        calib_dir: args.calib,
+        output: args.output,
+        output_options: looming::output::OutputOptions {
+            force: args.force,
+            ..looming::output::OutputOptions::default()
+        },
+        max_points: args.max_points,
+        sweep: args.sweep,
+    };
+    let summary = looming::kitti::import_kitti(&options).map_err(|error| {
+        let usage = matches!(
+            &error,
+            looming::kitti::ImportError::Output(OutputError::Exists { .. })
+        );
+        Failure::with_code(error, if usage { 2 } else { 1 })
+    })?;
+    if !args.quiet {
+        eprintln!(
+            "looming import-kitti: {} scans ({} points, {} missing), {} OXTS packets ({} missing), {:.1} MB in {:.2} s -> {}",
+            summary.scans_written,
+            summary.points_written,
+            summary.scans_missing,
+            summary.oxts_written,
+            summary.oxts_missing,
+            summary.output_bytes as f64 / 1e6,
+            summary.elapsed_s,
+            summary.output
+        );
+        eprintln!(
+            "  sweep times   {}; turning {:?}; rings derived in {} of {} scans",
+            summary.sweep_times,
+            summary.sweep_direction,
+            summary.scans_with_rings,
+            summary.scans_written
+        );
+        if let Some(calib) = &summary.calibration {
+            eprintln!("  calibration   {calib}");
+        }
+        for warning in &summary.warnings {
+            eprintln!("  warning       {warning}");
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! What the commands print: the one-screen `process` summary, the
+//! `synth` and `import-kitti` lines, and the progress bar.
+
+use std::fmt::Write as _;
+use std::io::IsTerminal;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use looming::input::ReadMode;
+use looming::model::format_log_time;
+use looming::output::WriteMode;
+use looming::pipeline::{ProgressSink, RunSummary};
+
+/// indicatif progress on stderr when it is a terminal, silent otherwise.
+pub(crate) struct Progress {
+    pub(crate) bar: ProgressBar,
+}
+
+impl Progress {
+    pub(crate) fn new(quiet: bool) -> Self {
+        let bar = if quiet || !std::io::stderr().is_terminal() {
+            ProgressBar::hidden()
+        } else {
+            let bar = ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} messages ({per_sec}, eta {eta})")
+                    .expect("static template is valid"),
+            );
+            bar
+        };
+        Self { bar }
+    }
+}
+
+impl ProgressSink for Progress {
+    fn update(&self, done: u64, total: Option<u64>) {
+        if let Some(total) = total {
+            self.bar.set_length(total.max(done));
+        }
+        self.bar.set_position(done);
+    }
+}
+
+/// How the output was written, for the summary.
+fn write_line(s: &RunSummary) -> String {
+    match &s.write {
+        WriteMode::PassThrough => format!(
+            "pass-through: {} input chunks copied as they are ({} decompressed to read the selected topics)",
+            s.input_report.chunks_copied, s.input_report.chunks_decompressed
+        ),
+        WriteMode::Rewrite { reason } => format!("every message written anew ({reason})"),
+    }
+}
+
+/// The one-screen summary of a `process` run.
+pub(crate) fn summary_text(s: &RunSummary) -> String {
+    let mut out = String::new();
+    read_and_decode_lines(&mut out, s);
+    layout_lines(&mut out, s);
+    pairs_lines(&mut out, s);
+    event_lines(&mut out, s);
+    problem_lines(&mut out, s);
+    size_line(&mut out, s);
+    out
+}
+
+/// Input, output, how they were read and written, topics and decoded counts.
+fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
+    let mode = match &s.read {
+        ReadMode::Indexed => "indexed, log-time order".to_string(),
+        ReadMode::Linear { reason } => format!("linear, file order with reorder window ({reason})"),
+    };
+    let _ = writeln!(
+        out,
+        "looming {}: {} -> {}",
+        s.tool_version, s.input, s.output
+    );
+    let _ = writeln!(out, "  read          {mode}");
+    let _ = writeln!(out, "  write         {}", write_line(s));
+    let _ = writeln!(
+        out,
+        "  copied        {} messages, {} metadata, {} attachments",
+        s.messages_copied, s.metadata_copied, s.attachments_copied
+    );
+    let topic = |c: &Option<looming::topics::SelectedChannel>| {
+        c.as_ref().map_or("none".to_string(), |c| c.topic.clone())
+    };
+    let _ = writeln!(
+        out,
+        "  topics        lidar {}, imu {}, velocity {}, tf {}",
+        s.topics.lidar.topic,
+        topic(&s.topics.imu),
+        topic(&s.topics.velocity),
+        s.topics.tf.len()
+    );
+    let _ = writeln!(
+        out,
+        "  decoded       {} scans ({} points, {} invalid skipped), {} imu, {} velocity, {} tf",
+        s.decoded.scans,
+        s.decoded.lidar_points,
+        s.decoded.invalid_points_skipped,
+        s.decoded.imu,
+        s.decoded.velocity,
+        s.decoded.tf_messages
+    );
+}
+
+/// How the LiDAR's rings and times were found.
+fn layout_lines(out: &mut String, s: &RunSummary) {
+    if let Some(layout) = &s.pairing.layout {
+        let _ = writeln!(out, "  layout        {}: {layout}", s.topics.lidar.topic);
+        if s.pairing.layout_kinds.len() > 1 {
+            let kinds: Vec<String> = s
+                .pairing
+                .layout_kinds
+                .iter()
+                .map(|(kind, n)| format!("{kind} {n}"))
+                .collect();
+            let _ = writeln!(
+                out,
+                "                (varies by scan: {})",
+                kinds.join(", ")
+            );
+        }
+        if s.pairing.ring_fields_dropped > 0 {
+            let _ = writeln!(
+                out,
+                "                ring field dropped in {} scans (values not ring numbers)",
+                s.pairing.ring_fields_dropped
+            );
+        }
+    }
+}
+
+/// Pairs made and skipped, and what the engine did with them.
+fn pairs_lines(out: &mut String, s: &RunSummary) {
+    let p = &s.pairing;
+    let _ = writeln!(
+        out,
+        "  pairs         {} written; skipped: {} dt<=0, {} gaps; {} without velocity, {} without imu",
+        s.pairs_written,
+        p.skipped_nonpositive_dt,
+        p.skipped_gap,
+        p.pairs_without_velocity,
+        p.pairs_without_imu
+    );
+    let a = &s.annotation;
+    let _ = writeln!(
+        out,
+        "  looming       {} pairs annotated ({} LiDAR-only, {} with the ego motion estimated from the scans, {} without a range image); {} points, {} moving, {} at threat; engine {:.1} s",
+        a.pairs_annotated,
+        a.pairs_lidar_only,
+        a.pairs_motion_estimated,
+        a.pairs_without_image,
+        a.points_written,
+        a.disagreement_points_written,
+        a.threat_points_written,
+        a.engine_s
+    );
+    if a.images_not_encoded > 0 {
+        let _ = writeln!(
+            out,
+            "  warning       {} range images could not be encoded as PNG and were left out",
+            a.images_not_encoded
+        );
+    }
+}
+
+/// The near misses, the first five in full.
+fn event_lines(out: &mut String, s: &RunSummary) {
+    let _ = writeln!(out, "  near misses   {}", s.events.len());
+    for event in s.events.iter().take(5) {
+        let _ = writeln!(
+            out,
+            "    {} at {}",
+            looming::annotate::foxglove::event_summary(event),
+            format_log_time(event.start_log_time_ns)
+        );
+    }
+    if s.events.len() > 5 {
+        let _ = writeln!(
+            out,
+            "    ... (all of them with `looming events` or --events)"
+        );
+    }
+}
+
+/// Replaced messages, bad messages and warnings.
+fn problem_lines(out: &mut String, s: &RunSummary) {
+    if s.replaced_messages > 0 {
+        let _ = writeln!(
+            out,
+            "  replaced      {} messages of an earlier run's /looming/* channels",
+            s.replaced_messages
+        );
+    }
+    let _ = writeln!(out, "  bad messages  {}", s.bad_messages);
+    for bad in s.bad_message_examples.iter().take(5) {
+        let _ = writeln!(out, "    {bad}");
+    }
+    if s.bad_messages > 5 {
+        let _ = writeln!(out, "    ... (all of them in --json-summary)");
+    }
+    for warning in &s.warnings {
+        let _ = writeln!(out, "  warning       {warning}");
+    }
+}
+
+/// Sizes, time and throughput.
+fn size_line(out: &mut String, s: &RunSummary) {
+    let mb = |b: u64| b as f64 / 1e6;
+    let _ = writeln!(
+        out,
+        "  size          {:.1} MB -> {:.1} MB in {:.2} s ({:.1} MB/s)",
+        mb(s.input_bytes),
+        mb(s.output_bytes),
+        s.elapsed_s,
+        mb(s.input_bytes) / s.elapsed_s.max(1e-9)
+    );
+}

@@ -1,0 +1,159 @@
+//! Every check of the command line's values, in one place, and the one
+//! validated configuration each command runs with. A bad value is a usage
+//! error (exit code 2) naming the flag; the library never sees it.
+
+use looming::annotate::AnnotateConfig;
+use looming::decode::DecodeLimits;
+use looming::engine::EngineConfig;
+use looming::events::EventConfig;
+use looming::input::InputOptions;
+use looming::output::OutputOptions;
+use looming::pairing::{PairingConfig, parse_extrinsic};
+use looming::pipeline::{ProcessConfig, ScanOptions};
+use looming::render::{RenderAt, RenderOptions};
+use looming::topics::TopicOverrides;
+
+use super::Failure;
+use super::args::{ProcessArgs, RenderArgs, ScanArgs};
+
+/// A usage error: exit code 2.
+fn usage(message: String) -> Failure {
+    Failure {
+        error: anyhow::anyhow!(message),
+        code: 2,
+    }
+}
+
+/// `--threat-ttc LOW,MEDIUM,HIGH` (a clap value parser, so that clap reports
+/// it with the flag).
+pub(crate) fn parse_threat_ttc(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    let [low, medium, high] = values[..] else {
+        return Err("three times to contact are needed: LOW,MEDIUM,HIGH".into());
+    };
+    if !(high > 0.0 && medium > high && low > medium && low.is_finite()) {
+        return Err("times to contact must be finite and decrease: LOW > MEDIUM > HIGH > 0".into());
+    }
+    Ok([low, medium, high])
+}
+
+/// How the log is read, decoded and paired, checked.
+pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
+    if !(args.reorder_window.is_finite() && args.reorder_window >= 0.0) {
+        return Err(usage(
+            "--reorder-window must be a non-negative number of seconds".into(),
+        ));
+    }
+    if args.max_gap.is_some_and(|g| !(g.is_finite() && g > 0.0)) {
+        return Err(usage(
+            "--max-gap must be a positive number of seconds".into(),
+        ));
+    }
+    let cli_extrinsic = match &args.extrinsic {
+        Some(text) => Some(
+            parse_extrinsic(text)
+                .map_err(|e| usage(format!("invalid option: --extrinsic: {e}")))?,
+        ),
+        None => None,
+    };
+    Ok(ScanOptions {
+        input_options: InputOptions {
+            verify_crc: args.verify,
+            reorder_window_ns: (args.reorder_window * 1e9) as u64,
+            ..InputOptions::default()
+        },
+        topics: TopicOverrides {
+            lidar: args.lidar_topic.clone(),
+            imu: args.imu_topic.clone(),
+            velocity: args.velocity_topic.clone(),
+        },
+        pairing: PairingConfig {
+            max_gap_s: args.max_gap,
+            cli_extrinsic,
+            ..PairingConfig::default()
+        },
+        decode_limits: DecodeLimits {
+            max_points: args.max_points,
+        },
+        strict: args.strict,
+    })
+}
+
+/// The near-miss detector's settings, checked.
+fn event_config(args: &ProcessArgs) -> Result<EventConfig, Failure> {
+    if !(args.event_ttc.is_finite() && args.event_ttc > 0.0) {
+        return Err(usage(
+            "--event-ttc must be a positive number of seconds".into(),
+        ));
+    }
+    if !(args.corridor_half_width.is_finite() && args.corridor_half_width > 0.0) {
+        return Err(usage(
+            "--corridor-half-width must be a positive number of metres".into(),
+        ));
+    }
+    if args.event_min_cells == Some(0) {
+        return Err(usage("--event-min-cells must be at least 1".into()));
+    }
+    Ok(EventConfig {
+        ttc_threshold_s: args.event_ttc,
+        min_cells: args.event_min_cells,
+        min_pairs: args.event_min_pairs,
+        corridor_half_width_m: args.corridor_half_width,
+        ..EventConfig::default()
+    })
+}
+
+/// `looming process`'s configuration.
+pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failure> {
+    let scans = scan_options(&args.scans)?;
+    let events = event_config(args)?;
+    Ok(ProcessConfig {
+        input: args.input.clone(),
+        output: args.output.clone(),
+        scans,
+        output_options: OutputOptions {
+            compression: args.compression,
+            force: args.force,
+            ..OutputOptions::default()
+        },
+        annotate: AnnotateConfig {
+            engine: EngineConfig {
+                threat_ttc_s: args.threat_ttc,
+                ..EngineConfig::default()
+            },
+            events,
+            fields: args.fields,
+        },
+        replace: args.replace,
+        events_file: args.events.clone(),
+    })
+}
+
+/// `looming render`'s options.
+pub(crate) fn render_options(args: &RenderArgs) -> Result<RenderOptions, Failure> {
+    let at = match (args.time, args.frame) {
+        (Some(t), _) if t.is_finite() && t >= 0.0 => RenderAt::Time(t),
+        (Some(_), _) => {
+            return Err(usage(
+                "--time must be a non-negative number of seconds".into(),
+            ));
+        }
+        (None, Some(n)) => RenderAt::Frame(n),
+        (None, None) => return Err(usage("give --time SECONDS or --frame N".into())),
+    };
+    Ok(RenderOptions {
+        input: args.file.clone(),
+        output: args.output.clone(),
+        channel: args.channel,
+        at,
+        view: args.view,
+        row_height_px: args.row_height.max(1),
+        top_extent_m: args.extent,
+        top_size_px: args.size.max(16),
+        force: args.force,
+        scans: scan_options(&args.scans)?,
+    })
+}

@@ -1,0 +1,201 @@
+//! How a log's messages become scan pairs, in one place for `process`,
+//! `eval` and `render`: the options they share ([`ScanOptions`]), the
+//! decoder of the selected topics (a failure is a [`BadMessage`], skipped and
+//! counted, fatal with `strict`) and the pairing stage that counts what was
+//! decoded and feeds the pairer.
+
+use std::collections::{BTreeMap, HashMap};
+
+use crate::decode::{self, DecodeLimits};
+use crate::input::{Catalog, InputOptions};
+use crate::model::{Decoded, ScanPair, format_log_time};
+use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
+use crate::topics::{Role, SelectedChannel, TopicOverrides, TopicSelection};
+
+/// How a log is read, decoded and paired: the options `process`, `eval`
+/// and `render` share, so that all three see the same scan pairs.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct ScanOptions {
+    pub input_options: InputOptions,
+    pub topics: TopicOverrides,
+    /// The pairer's settings; whether a velocity and an IMU source exist is
+    /// set from each log's topics.
+    pub pairing: PairingConfig,
+    #[serde(skip)]
+    pub decode_limits: DecodeLimits,
+    /// Any bad input message, or chunk CRC mismatch, fails the run.
+    pub strict: bool,
+}
+
+/// A bad input message: skipped and counted (fatal with `--strict`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BadMessage {
+    pub file: String,
+    pub topic: String,
+    pub log_time_ns: u64,
+    pub reason: String,
+}
+
+impl std::fmt::Display for BadMessage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: topic {} at log time {} ({}): {}",
+            self.file,
+            self.topic,
+            self.log_time_ns,
+            format_log_time(self.log_time_ns),
+            self.reason
+        )
+    }
+}
+
+/// Messages decoded per role.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct DecodedCounts {
+    pub scans: u64,
+    pub lidar_points: u64,
+    pub invalid_points_skipped: u64,
+    pub imu: u64,
+    pub velocity: u64,
+    pub tf_messages: u64,
+}
+
+const BAD_MESSAGE_EXAMPLES: usize = 20;
+
+/// A decoded message: its log time and what it holds.
+pub(crate) type DecodeResult = Result<(u64, Decoded), BadMessage>;
+
+/// Decodes the messages of the selected topics.
+pub(crate) struct Decoder<'a> {
+    limits: &'a DecodeLimits,
+    by_channel: HashMap<u16, &'a SelectedChannel>,
+    file_name: String,
+}
+
+impl<'a> Decoder<'a> {
+    pub(crate) fn new(
+        options: &'a ScanOptions,
+        topics: &'a TopicSelection,
+        file_name: &str,
+    ) -> Self {
+        Self {
+            limits: &options.decode_limits,
+            by_channel: topics.all().map(|c| (c.channel_id, c)).collect(),
+            file_name: file_name.to_owned(),
+        }
+    }
+
+    /// The message decoded, when its channel is selected.
+    pub(crate) fn decode(
+        &self,
+        channel_id: u16,
+        log_time_ns: u64,
+        data: &[u8],
+    ) -> Option<DecodeResult> {
+        let channel = self.by_channel.get(&channel_id)?;
+        let is_static = channel.role == Role::TfStatic;
+        let decoded = decode::decode(channel.kind, channel.encoding, is_static, data, self.limits);
+        Some(
+            decoded
+                .map(|decoded| (log_time_ns, decoded))
+                .map_err(|err| BadMessage {
+                    file: self.file_name.clone(),
+                    topic: channel.topic.clone(),
+                    log_time_ns,
+                    reason: err.to_string(),
+                }),
+        )
+    }
+}
+
+/// Bad messages: how many, per topic, and the first few in full.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct BadMessages {
+    pub count: u64,
+    pub by_topic: BTreeMap<String, u64>,
+    pub examples: Vec<BadMessage>,
+}
+
+impl BadMessages {
+    pub(crate) fn add(&mut self, bad: BadMessage) {
+        self.count += 1;
+        *self.by_topic.entry(bad.topic.clone()).or_default() += 1;
+        if self.examples.len() < BAD_MESSAGE_EXAMPLES {
+            self.examples.push(bad);
+        }
+    }
+}
+
+/// The pairing side of the decode-and-pair loop: counts what was decoded and
+/// what failed, feeds the pairer and keeps its warnings.
+pub(crate) struct PairingStage {
+    pairer: ScanPairer,
+    pub(crate) decoded: DecodedCounts,
+    pub(crate) bad: BadMessages,
+    pub(crate) warnings: Vec<String>,
+}
+
+impl PairingStage {
+    /// A pairer for the log whose catalog and selected topics are given.
+    pub(crate) fn new(options: &ScanOptions, catalog: &Catalog, topics: &TopicSelection) -> Self {
+        let mut pairer = ScanPairer::new(PairingConfig {
+            has_velocity_source: topics.velocity.is_some(),
+            has_imu_source: topics.imu.is_some(),
+            ..options.pairing.clone()
+        });
+        pairer.set_nominal_period_s(catalog.nominal_period_s(topics.lidar.channel_id));
+        Self {
+            pairer,
+            decoded: DecodedCounts::default(),
+            bad: BadMessages::default(),
+            warnings: Vec::new(),
+        }
+    }
+
+    /// A decoded message in; the pairs it completes out, in order.
+    pub(crate) fn push(&mut self, log_time_ns: u64, decoded: Decoded) -> Vec<ScanPair> {
+        let events = feed(&mut self.pairer, &mut self.decoded, log_time_ns, decoded);
+        self.pairs(events)
+    }
+
+    /// The end of the log: the pairs still held.
+    pub(crate) fn finish(&mut self) -> Vec<ScanPair> {
+        let events = self.pairer.finish();
+        self.pairs(events)
+    }
+
+    pub(crate) fn stats(&self) -> &PairingStats {
+        self.pairer.stats()
+    }
+
+    fn pairs(&mut self, events: Vec<PairEvent>) -> Vec<ScanPair> {
+        let mut pairs = Vec::new();
+        for event in events {
+            match event {
+                PairEvent::Pair(pair) => pairs.push(pair),
+                PairEvent::Warning(warning) => self.warnings.push(warning),
+            }
+        }
+        pairs
+    }
+}
+
+fn feed(
+    pairer: &mut ScanPairer,
+    counts: &mut DecodedCounts,
+    log_time_ns: u64,
+    decoded: Decoded,
+) -> Vec<PairEvent> {
+    match &decoded {
+        Decoded::Scan(scan) => {
+            counts.scans += 1;
+            counts.lidar_points += scan.points_m.len() as u64;
+            counts.invalid_points_skipped += u64::from(scan.skipped_invalid_points);
+        }
+        Decoded::Imu(_) => counts.imu += 1,
+        Decoded::Velocity(_) => counts.velocity += 1,
+        Decoded::Transforms { .. } => counts.tf_messages += 1,
+    }
+    pairer.push_decoded(log_time_ns, decoded)
+}
