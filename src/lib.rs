@@ -7,13 +7,13 @@
 
 pub mod annotate;
 pub mod budget;
+pub mod commands;
 pub mod decode;
 pub mod engine;
 pub mod eval;
 pub mod events;
 pub mod fixtures;
 pub mod input;
-pub mod inspect;
 pub mod kitti;
 pub mod model;
 pub mod output;
@@ -21,8 +21,6 @@ pub mod pairing;
 pub mod pipeline;
 pub mod quality;
 pub mod quality_report;
-pub mod render;
-
 pub mod ros;
 pub mod ros_schemas;
 pub mod synth;

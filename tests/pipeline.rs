@@ -661,7 +661,10 @@ fn eval_and_render_pair_scans_as_process_does() {
         report.bad_messages.by_topic,
         serde_json::from_value(summary["bad_messages_by_topic"].clone()).unwrap()
     );
-    assert_eq!(report.pairing.skipped_gap, summary["pairing"]["skipped_gap"]);
+    assert_eq!(
+        report.pairing.skipped_gap,
+        summary["pairing"]["skipped_gap"]
+    );
     assert!(
         sources
             .iter()

@@ -7,11 +7,13 @@
 use std::path::{Path, PathBuf};
 
 use looming::annotate::colour;
+use looming::commands::render::{
+    RenderAt, RenderChannel, RenderError, RenderOptions, RenderView, render,
+};
 use looming::engine::{self, EngineConfig, NO_POINT, PairLooming};
 use looming::input::{InputFile, InputOptions};
 use looming::model::ScanPair;
 use looming::output::OutputOptions;
-use looming::render::{RenderAt, RenderChannel, RenderError, RenderOptions, RenderView, render};
 use looming::synth::{SynthOptions, synthesize};
 
 const ROWS_PER_BEAM: u32 = 4;

@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 use looming::annotate::FieldSet;
+use looming::commands::render::{RenderChannel, RenderView};
 use looming::kitti::SweepDirection;
 use looming::output::OutputCompression;
-use looming::render::{RenderChannel, RenderView};
 
 use super::resolve::parse_threat_ttc;
 

@@ -102,7 +102,7 @@ fn eval(args: EvalArgs) -> Result<(), Failure> {
 
 fn render(args: RenderArgs) -> Result<(), Failure> {
     let options = resolve::render_options(&args)?;
-    let summary = looming::render::render(&options).map_err(|error| {
+    let summary = looming::commands::render::render(&options).map_err(|error| {
         let code = if error.is_usage() { 2 } else { 1 };
         Failure::with_code(error, code)
     })?;
@@ -118,7 +118,7 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
 }
 
 fn inspect(args: InspectArgs) -> Result<(), Failure> {
-    let report = looming::inspect::inspect(&args.file)?;
+    let report = looming::commands::inspect::inspect(&args.file)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -128,12 +128,12 @@ fn inspect(args: InspectArgs) -> Result<(), Failure> {
 }
 
 fn events(args: EventsArgs) -> Result<(), Failure> {
-    let mut events = looming::events::read_events(&args.file)?;
+    let mut events = looming::commands::events::read_events(&args.file)?;
     looming::events::rank(&mut events);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&events)?);
     } else {
-        print!("{}", looming::events::events_table(&events));
+        print!("{}", looming::commands::events::events_table(&events));
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 //! error (exit code 2) naming the flag; the library never sees it.
 
 use looming::annotate::AnnotateConfig;
+use looming::commands::render::{RenderAt, RenderOptions};
 use looming::decode::DecodeLimits;
 use looming::engine::EngineConfig;
 use looming::events::EventConfig;
@@ -10,7 +11,6 @@ use looming::input::InputOptions;
 use looming::output::OutputOptions;
 use looming::pairing::{PairingConfig, parse_extrinsic};
 use looming::pipeline::{ProcessConfig, ScanOptions};
-use looming::render::{RenderAt, RenderOptions};
 use looming::topics::TopicOverrides;
 
 use super::Failure;

@@ -7,7 +7,6 @@
 
 mod cluster;
 mod corridor;
-mod listing;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -18,7 +17,6 @@ use crate::model::ScanPair;
 
 pub use cluster::{Cluster, ColSpan, hot_clusters};
 pub use corridor::{Corridor, PathSource};
-pub use listing::{ListingError, events_table, read_events};
 
 /// Schema of one event (`/looming/events` and the `--events` file's entries).
 pub const EVENT_SCHEMA: &str = include_str!("../../schemas/looming.NearMissEvent.schema.json");

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord};
 
-use super::NearMissEvent;
+use crate::events::NearMissEvent;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ListingError {
