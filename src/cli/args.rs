@@ -6,10 +6,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use looming::annotate::FieldSet;
-use looming::commands::render::{RenderChannel, RenderView};
-use looming::kitti::SweepDirection;
-use looming::output::OutputCompression;
+use super::choices::{FieldSet, OutputCompression, RenderChannel, RenderView, SweepDirection};
 
 use super::resolve::parse_threat_ttc;
 

@@ -4,6 +4,7 @@
 //! codes. All the work is in the library.
 
 mod args;
+mod choices;
 mod report;
 mod resolve;
 
@@ -217,7 +218,7 @@ fn import_kitti(args: ImportKittiArgs) -> Result<(), Failure> {
             ..looming::output::OutputOptions::default()
         },
         max_points: args.max_points,
-        sweep: args.sweep,
+        sweep: args.sweep.into(),
     };
     let summary = looming::kitti::import_kitti(&options).map_err(|error| {
         let usage = matches!(

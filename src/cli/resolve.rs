@@ -115,7 +115,7 @@ pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failur
         output: args.output.clone(),
         scans,
         output_options: OutputOptions {
-            compression: args.compression,
+            compression: args.compression.into(),
             force: args.force,
             ..OutputOptions::default()
         },
@@ -125,7 +125,7 @@ pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failur
                 ..EngineConfig::default()
             },
             events,
-            fields: args.fields,
+            fields: args.fields.into(),
         },
         replace: args.replace,
         events_file: args.events.clone(),
@@ -147,9 +147,9 @@ pub(crate) fn render_options(args: &RenderArgs) -> Result<RenderOptions, Failure
     Ok(RenderOptions {
         input: args.file.clone(),
         output: args.output.clone(),
-        channel: args.channel,
+        channel: args.channel.into(),
         at,
-        view: args.view,
+        view: args.view.into(),
         row_height_px: args.row_height.max(1),
         top_extent_m: args.extent,
         top_size_px: args.size.max(16),

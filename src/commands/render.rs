@@ -20,7 +20,7 @@ use crate::model::ScanPair;
 use crate::pipeline::{ReplayError, ScanOptions, replay_input};
 
 /// What a pixel shows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RenderChannel {
     /// Fused looming of the cell, grey where masked.
@@ -38,7 +38,7 @@ pub enum RenderChannel {
 }
 
 /// How the scan is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RenderView {
     /// The range image: a row of cells per beam (highest at the top), forward
