@@ -504,6 +504,14 @@ mod tests {
         }
 
         fn build(mut self, ego: bool) -> (PairLooming, Scan) {
+            self.pad_to_full_rows();
+            let image = self.range_image();
+            let points = std::mem::take(&mut self.points);
+            let looming = self.into_looming(image, points.len(), ego);
+            (looming, scan_of(points))
+        }
+
+        fn pad_to_full_rows(&mut self) {
             if self.points.len() % 2 == 1 {
                 // Pad to two full rows with an empty cell (no point).
                 self.normals.push([0.0; 3]);
@@ -512,15 +520,11 @@ mod tests {
                 self.d.push(f32::NAN);
                 self.moving.push(false);
             }
+        }
+
+        fn range_image(&self) -> RangeImage {
             let cells = self.masks.len();
             let n_points = self.points.len();
-            let geometry = ImageGeometry {
-                rows: 2,
-                cols: cells / 2,
-                beams: BeamTable::uniform(2, -0.3, 0.0),
-                ring_to_row: None,
-                parallax_rad_m: None,
-            };
             let point: Vec<u32> = (0..cells)
                 .map(|c| if c < n_points { c as u32 } else { NO_POINT })
                 .collect();
@@ -541,14 +545,27 @@ mod tests {
                     }
                 })
                 .collect();
-            let image = RangeImage {
+            RangeImage {
                 range_m,
                 point,
                 point_cell: (0..n_points as u32).collect(),
                 point_surface,
+            }
+        }
+
+        /// The engine's result over these cells (what the cells do not set
+        /// is NaN, not disagreeing, or at no threat).
+        fn into_looming(self, image: RangeImage, n_points: usize, ego: bool) -> PairLooming {
+            let cells = self.masks.len();
+            let geometry = ImageGeometry {
+                rows: 2,
+                cols: cells / 2,
+                beams: BeamTable::uniform(2, -0.3, 0.0),
+                ring_to_row: None,
+                parallax_rad_m: None,
             };
             let nan = vec![f32::NAN; cells];
-            let looming = PairLooming {
+            PairLooming {
                 geometry,
                 availability: Availability {
                     ego_velocity: ego,
@@ -576,22 +593,26 @@ mod tests {
                 velocity_mps: None,
                 angular_velocity_radps: None,
                 ego_estimate: None,
-            };
-            let scan = Scan {
-                stamp_ns: 0,
-                frame_id: "lidar".into(),
-                sensor_pose: nalgebra::Isometry3::identity(),
-                points_m: self.points,
-                intensity: None,
-                ring: None,
-                time_offset_s: None,
-                source_index: (0..n_points as u32).collect(),
-                input_point_count: n_points as u32,
-                skipped_invalid_points: 0,
-                organized: None,
-                layout: Default::default(),
-            };
-            (looming, scan)
+            }
+        }
+    }
+
+    /// The current scan of `points`, in the LiDAR frame.
+    fn scan_of(points: Vec<[f32; 3]>) -> Scan {
+        let n_points = points.len();
+        Scan {
+            stamp_ns: 0,
+            frame_id: "lidar".into(),
+            sensor_pose: nalgebra::Isometry3::identity(),
+            points_m: points,
+            intensity: None,
+            ring: None,
+            time_offset_s: None,
+            source_index: (0..n_points as u32).collect(),
+            input_point_count: n_points as u32,
+            skipped_invalid_points: 0,
+            organized: None,
+            layout: Default::default(),
         }
     }
 

@@ -111,7 +111,9 @@ pub fn candidates(catalog: &Catalog) -> Vec<SelectedChannel> {
         .channel_infos()
         .into_iter()
         // Our own output and synthetic ground truth are never inputs.
-        .filter(|info| !info.topic.starts_with("/looming/") && !info.topic.starts_with("/truth/"))
+        .filter(|info| {
+            !crate::annotate::topics::is_ours(&info.topic) && !info.topic.starts_with("/truth/")
+        })
         .filter_map(|info| {
             let kind = MessageKind::from_schema_name(&info.schema_name)?;
             let encoding = WireEncoding::from_message_encoding(&info.message_encoding)?;

@@ -5,6 +5,7 @@
 
 pub mod colour;
 pub mod foxglove;
+pub mod topics;
 
 use std::time::Instant;
 
@@ -19,14 +20,10 @@ use crate::quality::PairQuality;
 
 pub use self::foxglove::FieldSet;
 
-pub const POINTS_TOPIC: &str = "/looming/points";
-pub const DISAGREEMENT_TOPIC: &str = "/looming/disagreement";
-pub const THREAT_TOPIC: &str = "/looming/threat";
-pub const THREAT_ZONES_TOPIC: &str = "/looming/threat_zones";
-pub const IMAGE_FUSED_TOPIC: &str = "/looming/image/fused";
-pub const IMAGE_DISAGREEMENT_TOPIC: &str = "/looming/image/disagreement";
-pub const EVENTS_TOPIC: &str = "/looming/events";
-pub const LOG_TOPIC: &str = "/looming/log";
+pub use self::topics::{
+    DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
+    POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
+};
 
 /// Settings of the annotation stage.
 #[derive(Debug, Clone, Default, serde::Serialize)]

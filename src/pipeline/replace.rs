@@ -2,13 +2,10 @@
 //! channels is refused, or its channels are dropped so that a fresh set is
 //! written.
 
+use crate::annotate::topics::is_ours;
 use crate::input::{Catalog, InputFile};
 
 use super::ProcessError;
-
-pub(super) fn is_ours(topic: &str) -> bool {
-    topic.starts_with("/looming/")
-}
 
 /// The input's catalog without the `/looming/*` channels (and the schemas
 /// only they use), for `--replace`.
