@@ -24,7 +24,6 @@ pub mod quality_report;
 pub mod render;
 pub mod replay;
 pub mod ros;
-pub mod ros_schemas;
 pub mod synth;
 pub mod topics;
 

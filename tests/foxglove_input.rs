@@ -57,7 +57,8 @@ fn foxglove_point_clouds_are_paired_with_their_pose_as_lever_arm() {
     let schema = PointCloud::get_schema().unwrap();
     log.schema(1, &schema.name, &schema.encoding, &schema.data);
     log.channel(1, 1, "/lidar", "protobuf");
-    let twist_schema = looming::ros_schemas::twist_stamped(looming::ros_schemas::RosDialect::Ros2);
+    let twist_schema =
+        looming::ros::schemas::twist_stamped(looming::ros::schemas::RosDialect::Ros2);
     log.schema(
         2,
         "geometry_msgs/msg/TwistStamped",

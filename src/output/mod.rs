@@ -497,7 +497,7 @@ pub struct OwnChannelSpec {
 impl OwnChannelSpec {
     /// A ROS 2 (CDR) channel of `package/msg/type_name` with its definition.
     pub fn ros2(topic: &str, package: &str, type_name: &str, definition: String) -> Self {
-        let dialect = crate::ros_schemas::RosDialect::Ros2;
+        let dialect = crate::ros::schemas::RosDialect::Ros2;
         Self {
             topic: topic.into(),
             schema_name: dialect.schema_name(package, type_name),
