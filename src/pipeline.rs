@@ -14,11 +14,11 @@ use crate::decode::{self, DecodeLimits};
 use crate::events::{EventsFile, NearMissEvent};
 use std::sync::Arc;
 
+use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
 use crate::budget::{ByteBudget, Ticket};
 use crate::input::{Catalog, CopiedRecord, CopyEvent};
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord, ReadMode, ReadReport};
 use crate::messages::Decoded;
-use crate::output::pairs::{PairRecord, pairs_channel_spec};
 use crate::output::{
     Copied, OutputError, OutputOptions, OutputWriter, WriteMode, check_output_path,
 };

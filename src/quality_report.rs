@@ -9,8 +9,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::annotate::pairs::PAIRS_TOPIC;
 use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord};
-use crate::output::pairs::PAIRS_TOPIC;
 use crate::quality::{AbsHistogram, MaskCounts, PairQuality, median};
 
 /// A ground half reads "approaching" or "receding" beyond this, 1/s.

@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use foxglove::Encode;
 use foxglove::messages::{PackedElementField, PointCloud, Pose, Quaternion, Timestamp, Vector3};
-use looming::output::pairs::PairRecord;
+use looming::annotate::pairs::PairRecord;
 use looming::ros::msgs::{Header, Twist, TwistStamped};
 
 fn cloud(stamp_ns: u64) -> PointCloud {

@@ -11,7 +11,6 @@
 
 mod chunk;
 mod ids;
-pub mod pairs;
 mod passthrough;
 mod raw;
 mod summary;

@@ -1,11 +1,14 @@
 //! `/looming/pairs`: one JSON message per scan pair (schema
-//! `schemas/looming.ScanPair.schema.json`).
+//! `schemas/looming.ScanPair.schema.json`), saying what went into the pair's
+//! looming: its two scans and their layouts, the motion, what was unavailable
+//! and, once measured, the pair's quality. One of our annotation channels; the
+//! writer only registers its [`OwnChannelSpec`].
 
 use serde::Serialize;
 
-use super::OwnChannelSpec;
 use crate::engine::layout::{RingSource, ScanLayout, TimeSource};
 use crate::messages::Scan;
+use crate::output::OwnChannelSpec;
 use crate::pairing::ScanPair;
 use crate::pairing::frames::ExtrinsicInfo;
 use crate::quality::PairQuality;
