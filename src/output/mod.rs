@@ -6,8 +6,8 @@
 //! into new chunks) and the pass-through ([`passthrough`]: the input's chunk
 //! records copied byte for byte, our messages in chunks of their own,
 //! compressed in parallel). Either way the output goes to a temporary file
-//! beside the destination and is renamed only when complete ([`temp`]), so a
-//! failed run never leaves a half-written log under the requested name.
+//! beside the destination and is renamed only when complete ([`AtomicFile`]),
+//! so a failed run never leaves a half-written log under the requested name.
 
 mod chunk;
 mod ids;
@@ -16,6 +16,7 @@ mod raw;
 mod summary;
 mod temp;
 pub(crate) use temp::beside as temp_beside;
+pub use temp::{AtomicFile, AtomicTarget};
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -140,7 +141,9 @@ pub fn check_overwrite(output: &Path, force: bool) -> Result<(), OutputError> {
     Ok(())
 }
 
-fn same_file(a: &Path, b: &Path) -> bool {
+/// Whether `a` and `b` name the same existing file, whatever the spelling
+/// (relative, `..`, symbolic links); `false` if either does not exist.
+pub fn same_file(a: &Path, b: &Path) -> bool {
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
