@@ -199,12 +199,18 @@ mod tests {
         names
     }
 
+    /// An uncommitted file for `target` holding `bytes`.
+    fn written(target: &Path, bytes: &[u8]) -> AtomicFile {
+        let mut file = AtomicFile::create(target).unwrap();
+        file.write_all(bytes).unwrap();
+        file
+    }
+
     #[test]
     fn a_dropped_uncommitted_file_leaves_no_temporary_file_and_no_target() {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("out.json");
-        let mut file = AtomicFile::create(&target).unwrap();
-        file.write_all(b"half").unwrap();
+        let file = written(&target, b"half");
         assert_eq!(names_in(dir.path()).len(), 1, "the temporary file exists");
         drop(file);
         assert_eq!(names_in(dir.path()), Vec::<String>::new());
@@ -215,8 +221,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("out.json");
         std::fs::write(&target, b"old").unwrap();
-        let mut file = AtomicFile::create(&target).unwrap();
-        file.write_all(b"new").unwrap();
+        let file = written(&target, b"new");
         drop(file);
         assert_eq!(names_in(dir.path()), vec!["out.json".to_string()]);
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
@@ -226,12 +231,10 @@ mod tests {
     fn a_committed_file_replaces_the_target() {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("sub").join("out.png");
-        let mut file = AtomicFile::create(&target).unwrap();
+        let file = written(&target, b"first");
         assert_eq!(file.final_path(), target);
-        file.write_all(b"first").unwrap();
         assert_eq!(file.commit().unwrap(), 5);
-        let mut file = AtomicFile::create(&target).unwrap();
-        file.write_all(b"second").unwrap();
+        let file = written(&target, b"second");
         assert_eq!(file.commit().unwrap(), 6);
         assert_eq!(std::fs::read(&target).unwrap(), b"second");
         assert_eq!(
@@ -244,15 +247,13 @@ mod tests {
     fn no_clobber_keeps_an_existing_target_and_removes_the_temporary_file() {
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("out.png");
-        let mut file = AtomicFile::create(&target).unwrap();
-        file.write_all(b"new").unwrap();
+        let file = written(&target, b"new");
         std::fs::write(&target, b"old").unwrap();
         let err = file.commit_no_clobber().unwrap_err();
         assert_eq!(err.kind(), std::io::ErrorKind::AlreadyExists);
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
         assert_eq!(names_in(dir.path()), vec!["out.png".to_string()]);
-        let mut file = AtomicFile::create(&target).unwrap();
-        file.write_all(b"new").unwrap();
+        let file = written(&target, b"new");
         std::fs::remove_file(&target).unwrap();
         file.commit_no_clobber().unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
