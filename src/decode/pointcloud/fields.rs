@@ -145,7 +145,7 @@ impl Layout<'_> {
     }
 }
 
-/// The readers for the fields a [`Scan`] uses.
+/// The readers for the fields a [`Scan`](crate::messages::Scan) uses.
 pub(super) struct Readers {
     pub(super) x: FieldReader,
     pub(super) y: FieldReader,
