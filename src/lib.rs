@@ -22,7 +22,6 @@ pub mod pipeline;
 pub mod quality;
 pub mod quality_report;
 pub mod ros;
-pub mod ros_schemas;
 pub mod synth;
 pub mod topics;
 

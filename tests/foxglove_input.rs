@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use foxglove::Encode;
 use foxglove::messages::{PackedElementField, PointCloud, Pose, Quaternion, Timestamp, Vector3};
-use looming::output::pairs::PairRecord;
+use looming::annotate::pairs::PairRecord;
 use looming::ros::msgs::{Header, Twist, TwistStamped};
 
 fn cloud(stamp_ns: u64) -> PointCloud {
@@ -57,7 +57,8 @@ fn foxglove_point_clouds_are_paired_with_their_pose_as_lever_arm() {
     let schema = PointCloud::get_schema().unwrap();
     log.schema(1, &schema.name, &schema.encoding, &schema.data);
     log.channel(1, 1, "/lidar", "protobuf");
-    let twist_schema = looming::ros_schemas::twist_stamped(looming::ros_schemas::RosDialect::Ros2);
+    let twist_schema =
+        looming::ros::schemas::twist_stamped(looming::ros::schemas::RosDialect::Ros2);
     log.schema(
         2,
         "geometry_msgs/msg/TwistStamped",

@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use looming::output::pairs::PairRecord;
+use looming::annotate::pairs::PairRecord;
 
 const SCANS: u32 = 12;
 

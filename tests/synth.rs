@@ -259,7 +259,7 @@ fn every_scenario_inspects_and_processes_and_its_motion_matches_the_truth() {
             .iter()
             .map(|m| serde_json::from_slice(&m.data).unwrap())
             .collect();
-        let pairs: Vec<looming::output::pairs::PairRecord> = contents
+        let pairs: Vec<looming::annotate::pairs::PairRecord> = contents
             .topic_messages("/looming/pairs")
             .iter()
             .map(|m| serde_json::from_slice(&m.data).unwrap())

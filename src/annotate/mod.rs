@@ -5,6 +5,7 @@
 
 pub mod colour;
 pub mod foxglove;
+pub mod pairs;
 pub mod topics;
 
 use std::time::Instant;

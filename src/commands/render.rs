@@ -17,6 +17,7 @@ use crate::annotate::colour;
 use crate::engine::{self, EngineConfig, NO_POINT, PairLooming};
 use crate::input::{InputError, InputFile};
 use crate::model::ScanPair;
+use crate::output::{AtomicFile, same_file};
 use crate::pipeline::{ReplayError, ScanOptions, replay_input};
 
 /// What a pixel shows.
@@ -432,13 +433,6 @@ fn circle(
     }
 }
 
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    }
-}
-
 /// Encode to a temporary file beside `path` and rename it into place; without
 /// `force` an output that appeared meanwhile is not replaced.
 fn write_png(image: &RgbImage, path: &Path, force: bool) -> Result<(), RenderError> {
@@ -446,8 +440,7 @@ fn write_png(image: &RgbImage, path: &Path, force: bool) -> Result<(), RenderErr
         path: path.to_path_buf(),
         source,
     };
-    let temp = crate::output::temp_beside(path).map_err(io_err)?;
-    let mut writer = BufWriter::new(temp);
+    let mut writer = BufWriter::new(AtomicFile::create(path).map_err(io_err)?);
     image::codecs::png::PngEncoder::new(&mut writer)
         .write_image(
             image.as_raw(),
@@ -460,20 +453,19 @@ fn write_png(image: &RgbImage, path: &Path, force: bool) -> Result<(), RenderErr
             source,
         })?;
     writer.flush().map_err(io_err)?;
-    let temp = writer.into_inner().map_err(|e| io_err(e.into_error()))?;
-    temp.as_file().sync_all().map_err(io_err)?;
-    let persisted = if force {
-        temp.persist(path)
+    let file = writer.into_inner().map_err(|e| io_err(e.into_error()))?;
+    let committed = if force {
+        file.commit()
     } else {
-        temp.persist_noclobber(path)
+        file.commit_no_clobber()
     };
-    persisted.map_err(|e| {
-        if !force && e.error.kind() == std::io::ErrorKind::AlreadyExists {
+    committed.map_err(|error| {
+        if !force && error.kind() == std::io::ErrorKind::AlreadyExists {
             RenderError::Exists {
                 path: path.to_path_buf(),
             }
         } else {
-            io_err(e.error)
+            io_err(error)
         }
     })?;
     Ok(())

@@ -90,41 +90,55 @@ fn scan_records(
                         }));
                     }
                 };
-                let seen = match record {
-                    Record::Schema { header, data } => Seen::Schema(Arc::new(Schema {
-                        id: header.id,
-                        name: header.name,
-                        encoding: header.encoding,
-                        data: std::borrow::Cow::Owned(data.into_owned()),
-                    })),
-                    Record::Channel(channel) => Seen::Channel(channel),
-                    Record::Message { header, data } => match data {
-                        std::borrow::Cow::Borrowed(bytes) => Seen::Message(header, bytes),
-                        std::borrow::Cow::Owned(bytes) => {
-                            // parse_record borrows; this arm is defensive.
-                            if visit(Seen::Message(header, &bytes))?.is_break() {
-                                return Err(InputError::Stopped);
-                            }
-                            continue;
-                        }
-                    },
-                    Record::Metadata(metadata) => Seen::Metadata(metadata),
-                    Record::Attachment { header, data, .. } => Seen::Attachment(InputAttachment {
-                        log_time_ns: header.log_time,
-                        create_time_ns: header.create_time,
-                        name: header.name,
-                        media_type: header.media_type,
-                        data: data.into_owned(),
-                    }),
-                    _ => continue,
-                };
-                if visit(seen)?.is_break() {
-                    return Err(InputError::Stopped);
-                }
+                deliver(record, visit)?;
             }
         }
     }
     Ok(None)
+}
+
+/// Hand one data-section record to `visit`; records the reader does not use
+/// are skipped.
+fn deliver(
+    record: Record<'_>,
+    visit: &mut dyn FnMut(Seen<'_>) -> Result<Flow, InputError>,
+) -> Result<(), InputError> {
+    let flow = match record {
+        // parse_record borrows the payload from the reader's buffer; an owned
+        // one (defensive) is lent the same way.
+        Record::Message { header, data } => visit(Seen::Message(header, &data))?,
+        other => match seen_without_payload(other) {
+            Some(seen) => visit(seen)?,
+            None => return Ok(()),
+        },
+    };
+    if flow.is_break() {
+        return Err(InputError::Stopped);
+    }
+    Ok(())
+}
+
+/// The schema, channel, metadata or attachment `record` as a [`Seen`] that
+/// owns its data; `None` for records the reader does not use.
+fn seen_without_payload(record: Record<'_>) -> Option<Seen<'static>> {
+    Some(match record {
+        Record::Schema { header, data } => Seen::Schema(Arc::new(Schema {
+            id: header.id,
+            name: header.name,
+            encoding: header.encoding,
+            data: std::borrow::Cow::Owned(data.into_owned()),
+        })),
+        Record::Channel(channel) => Seen::Channel(channel),
+        Record::Metadata(metadata) => Seen::Metadata(metadata),
+        Record::Attachment { header, data, .. } => Seen::Attachment(InputAttachment {
+            log_time_ns: header.log_time,
+            create_time_ns: header.create_time,
+            name: header.name,
+            media_type: header.media_type,
+            data: data.into_owned(),
+        }),
+        _ => return None,
+    })
 }
 
 fn describe_stop(err: &mcap::McapError, bytes_fed: u64) -> String {

@@ -17,7 +17,7 @@ use crate::ros::msgs::{
     Header, Imu, Quaternion, TFMessage, Transform, TransformStamped, Twist, TwistStamped,
     Vector3 as RosVector3, pointcloud2_from_points,
 };
-use crate::ros_schemas::{self, RosDialect};
+use crate::ros::schemas::{self as ros_schemas, RosDialect};
 
 use super::KittiError;
 use super::calib::read_imu_to_velo;

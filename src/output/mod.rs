@@ -6,17 +6,16 @@
 //! into new chunks) and the pass-through ([`passthrough`]: the input's chunk
 //! records copied byte for byte, our messages in chunks of their own,
 //! compressed in parallel). Either way the output goes to a temporary file
-//! beside the destination and is renamed only when complete ([`temp`]), so a
-//! failed run never leaves a half-written log under the requested name.
+//! beside the destination and is renamed only when complete ([`AtomicFile`]),
+//! so a failed run never leaves a half-written log under the requested name.
 
 mod chunk;
 mod ids;
-pub mod pairs;
 mod passthrough;
 mod raw;
 mod summary;
 mod temp;
-pub(crate) use temp::beside as temp_beside;
+pub use temp::{AtomicFile, AtomicTarget};
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -141,7 +140,9 @@ pub fn check_overwrite(output: &Path, force: bool) -> Result<(), OutputError> {
     Ok(())
 }
 
-fn same_file(a: &Path, b: &Path) -> bool {
+/// Whether `a` and `b` name the same existing file, whatever the spelling
+/// (relative, `..`, symbolic links); `false` if either does not exist.
+pub fn same_file(a: &Path, b: &Path) -> bool {
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
@@ -497,7 +498,7 @@ pub struct OwnChannelSpec {
 impl OwnChannelSpec {
     /// A ROS 2 (CDR) channel of `package/msg/type_name` with its definition.
     pub fn ros2(topic: &str, package: &str, type_name: &str, definition: String) -> Self {
-        let dialect = crate::ros_schemas::RosDialect::Ros2;
+        let dialect = crate::ros::schemas::RosDialect::Ros2;
         Self {
             topic: topic.into(),
             schema_name: dialect.schema_name(package, type_name),

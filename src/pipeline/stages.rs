@@ -6,6 +6,7 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
+use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
 use crate::annotate::{AnnotateStats, Annotator, OwnMessage, channel_specs};
 use crate::budget::{ByteBudget, Ticket};
 use crate::events::NearMissEvent;
@@ -13,7 +14,6 @@ use crate::input::{
     Catalog, CopiedRecord, CopyEvent, Flow, InputError, InputFile, InputRecord, ReadReport,
 };
 use crate::model::{Decoded, ScanPair};
-use crate::output::pairs::{PairRecord, pairs_channel_spec};
 use crate::output::{Copied, OutputWriter, WriteMode};
 use crate::topics::TopicSelection;
 

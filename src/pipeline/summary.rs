@@ -8,7 +8,7 @@ use std::time::Instant;
 use crate::annotate::AnnotateStats;
 use crate::events::{EventsFile, NearMissEvent};
 use crate::input::{InputFile, ReadMode, ReadReport};
-use crate::output::WriteMode;
+use crate::output::{AtomicFile, WriteMode};
 use crate::pairing::PairingStats;
 use crate::topics::TopicSelection;
 
@@ -182,9 +182,9 @@ fn write_events_file(
         path: path.to_path_buf(),
         source,
     };
-    let mut temp = crate::output::temp_beside(path).map_err(err)?;
+    let mut temp = AtomicFile::create(path).map_err(err)?;
     serde_json::to_writer_pretty(&mut temp, &file).map_err(|e| err(e.into()))?;
-    temp.persist(path).map_err(|e| err(e.error))?;
+    temp.commit().map_err(err)?;
     Ok(())
 }
 

@@ -1,5 +1,6 @@
 //! ROS wire formats: ROS 2 CDR (XCDR1) and ROS 1 serialization readers/writers
-//! ([`cdr`]) and the raw message structs built on them ([`msgs`]).
+//! ([`cdr`]), the raw message structs built on them ([`msgs`]), and the schema
+//! texts we write for them ([`schemas`]).
 //!
 //! Everything here works on borrowed byte slices and never does I/O. Every read
 //! is bounds-checked and untrusted sizes are checked against the remaining bytes
@@ -8,6 +9,7 @@
 
 pub mod cdr;
 pub mod msgs;
+pub mod schemas;
 
 /// Why a message payload could not be decoded.
 ///

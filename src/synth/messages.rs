@@ -11,7 +11,7 @@ use crate::ros::msgs::{
     TFMessage, Transform, TransformStamped, Twist, TwistStamped, TwistWithCovariance,
     Vector3 as RosVector3, datatype, pointcloud2_from_points,
 };
-use crate::ros_schemas::{self, RosDialect};
+use crate::ros::schemas::{self as ros_schemas, RosDialect};
 
 use super::scene::{CloudLayout, LaserOrder, Scenario};
 use super::sensor::{SimPoint, SimScan, World};

@@ -1,16 +1,16 @@
 //! `/looming/pairs`: one JSON message per scan pair (schema
-//! `schemas/looming.ScanPair.schema.json`).
+//! `schemas/looming.ScanPair.schema.json`), saying what went into the pair's
+//! looming: its two scans and their layouts, the motion, what was unavailable
+//! and, once measured, the pair's quality. One of our annotation channels; the
+//! writer only registers its [`OwnChannelSpec`].
 
 use serde::Serialize;
 
-use super::OwnChannelSpec;
-use crate::model::ExtrinsicInfo;
-use crate::model::Scan;
-use crate::model::ScanPair;
-use crate::model::{RingSource, ScanLayout, TimeSource};
+use crate::model::{ExtrinsicInfo, RingSource, Scan, ScanLayout, ScanPair, TimeSource};
+use crate::output::OwnChannelSpec;
 use crate::quality::PairQuality;
 
-pub const PAIRS_TOPIC: &str = "/looming/pairs";
+pub use super::topics::PAIRS_TOPIC;
 const PAIRS_SCHEMA: &str = include_str!("../../schemas/looming.ScanPair.schema.json");
 
 /// The channel and schema of `/looming/pairs`.
