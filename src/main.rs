@@ -13,7 +13,8 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(failure) => {
             // Library errors carry their causes in their own messages.
-            eprintln!("error: {}", failure.error);
+            let hint = cli::hint(&failure.error).unwrap_or_default();
+            eprintln!("error: {}{hint}", failure.error);
             ExitCode::from(failure.code as u8)
         }
     }

@@ -28,12 +28,14 @@ impl Role {
         }
     }
 
-    fn flag(self) -> &'static str {
+    /// The role in a word or two, as messages name it.
+    pub fn name(self) -> &'static str {
         match self {
-            Role::Lidar => "--lidar-topic",
-            Role::Imu => "--imu-topic",
-            Role::Velocity => "--velocity-topic",
-            Role::Tf | Role::TfStatic => "(tf topics are not chosen)",
+            Role::Lidar => "LiDAR",
+            Role::Imu => "IMU",
+            Role::Velocity => "velocity",
+            Role::Tf => "tf",
+            Role::TfStatic => "tf_static",
         }
     }
 
@@ -97,10 +99,23 @@ pub struct TopicOverrides {
 
 #[derive(Debug, thiserror::Error)]
 pub enum TopicError {
-    #[error("{0}")]
-    Unknown(String),
-    #[error("{0}")]
-    Ambiguous(String),
+    /// The topic asked for names no channel of its role.
+    #[error("{} topic {topic}: no {} channel has that topic.\n{candidates}", role.name(), role.what())]
+    Unknown {
+        role: Role,
+        topic: String,
+        candidates: String,
+    },
+    /// Several channels share the topic asked for.
+    #[error("{} topic {topic}: several channels share that topic (ids {ids}); the file is ambiguous.", role.name())]
+    Duplicated {
+        role: Role,
+        topic: String,
+        ids: String,
+    },
+    /// Several channels could serve the role and none was asked for.
+    #[error("several {} topics; one must be chosen.\n{candidates}", role.what())]
+    Ambiguous { role: Role, candidates: String },
     #[error("{0}")]
     Missing(String),
 }
@@ -183,32 +198,29 @@ fn choose(
             of_role.iter().filter(|c| c.topic == topic).collect();
         return match matching.as_slice() {
             [one] => Ok(Some((**one).clone())),
-            [] => Err(TopicError::Unknown(format!(
-                "{} {topic}: no {} channel has that topic.\n{}",
-                role.flag(),
-                role.what(),
-                list_candidates(&of_role, catalog)
-            ))),
-            _ => Err(TopicError::Ambiguous(format!(
-                "{} {topic}: several channels share that topic (ids {}); the file is ambiguous.",
-                role.flag(),
-                matching
+            [] => Err(TopicError::Unknown {
+                role,
+                topic: topic.to_owned(),
+                candidates: list_candidates(&of_role, catalog),
+            }),
+            _ => Err(TopicError::Duplicated {
+                role,
+                topic: topic.to_owned(),
+                ids: matching
                     .iter()
                     .map(|c| c.channel_id.to_string())
                     .collect::<Vec<_>>()
-                    .join(", ")
-            ))),
+                    .join(", "),
+            }),
         };
     }
     match of_role.as_slice() {
         [] => Ok(None),
         [one] => Ok(Some((*one).clone())),
-        _ => Err(TopicError::Ambiguous(format!(
-            "several {} topics; choose one with {}.\n{}",
-            role.what(),
-            role.flag(),
-            list_candidates(&of_role, catalog)
-        ))),
+        _ => Err(TopicError::Ambiguous {
+            role,
+            candidates: list_candidates(&of_role, catalog),
+        }),
     }
 }
 

@@ -5,6 +5,7 @@
 
 mod args;
 mod choices;
+mod hints;
 mod report;
 mod resolve;
 
@@ -16,6 +17,7 @@ use args::{
     Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, ProcessArgs, QualityArgs,
     RenderArgs, SynthArgs,
 };
+pub(crate) use hints::hint;
 use report::{Progress, summary_text};
 
 /// An error with its exit code.

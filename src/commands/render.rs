@@ -122,13 +122,13 @@ pub enum RenderError {
         at: String,
         pairs: u64,
     },
-    #[error("--time must be a finite number of seconds, not {0}")]
+    #[error("the time must be a finite number of seconds, not {0}")]
     BadTime(f64),
     #[error("{path}: pair {pair_index} gives no range image (too few points or no beam structure)")]
     NoImage { path: PathBuf, pair_index: u64 },
     #[error("{path}: the output must not be the input file")]
     SameAsInput { path: PathBuf },
-    #[error("{path}: exists already (use --force to replace it)")]
+    #[error("{path}: exists already")]
     Exists { path: PathBuf },
     #[error("{path}: cannot write the PNG: {source}")]
     Write {

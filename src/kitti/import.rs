@@ -179,7 +179,7 @@ pub fn import_kitti(options: &ImportOptions) -> Result<ImportSummary, ImportErro
     summary.oxts_written = oxts.len() as u64;
     if velo_from_imu.is_none() && !oxts.is_empty() {
         summary.warnings.push(
-            "no calib_imu_to_velo.txt: no /tf_static, `looming process` needs --extrinsic".into(),
+            "no calib_imu_to_velo.txt: no /tf_static, so the LiDAR's pose in the IMU frame must be given to `looming process`".into(),
         );
     }
     summary.output_bytes = writer.finish()?;
@@ -217,14 +217,14 @@ fn locate(options: &ImportOptions) -> Result<DriveFiles, KittiError> {
         (false, Some(_)) => {
             return Err(KittiError::Missing {
                 path: calib,
-                what: "the IMU-to-Velodyne calibration given by --calib".into(),
+                what: "the IMU-to-Velodyne calibration in the calibration folder given".into(),
             });
         }
         (false, None) if oxts_dir.is_some() => {
             return Err(KittiError::Missing {
                 path: calib,
                 what:
-                    "the IMU-to-Velodyne calibration (it sits in the date folder; pass --calib DIR)"
+                    "the IMU-to-Velodyne calibration (it sits in the date folder, or in the calibration folder given)"
                         .into(),
             });
         }

@@ -91,7 +91,7 @@ impl Default for OutputOptions {
 pub enum OutputError {
     #[error("{path}: the output must not be the input file")]
     SameAsInput { path: PathBuf },
-    #[error("{path}: exists already (use --force to replace it)")]
+    #[error("{path}: exists already")]
     Exists { path: PathBuf },
     #[error("{path}: cannot create the output: {source}")]
     Create {

@@ -54,9 +54,7 @@ pub enum ProcessError {
     Output(#[from] OutputError),
     #[error("{path}: {source}")]
     Topic { path: PathBuf, source: TopicError },
-    #[error(
-        "{path}: already holds looming output ({topics}); process the original log, or pass --replace to drop these channels and write fresh ones"
-    )]
+    #[error("{path}: already holds looming output ({topics})")]
     AlreadyProcessed { path: PathBuf, topics: String },
     #[error("{path}: cannot write the events file: {source}")]
     EventsFile {
