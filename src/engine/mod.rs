@@ -16,6 +16,13 @@
 //! `L_lidar` and by the full ego motion for `L_ray_ego`) into the current
 //! scan's own rays: exact on planes, so neither discretisation nor turning
 //! lights up the static world.
+//!
+//! Here the orchestration ([`compute_with_cache`], the [`EngineCache`]);
+//! the settings in `config.rs`, the result in `result.rs`, the ring and
+//! time recovery in `layout/`, the gridding in `grid.rs` (beam tables in
+//! `beams.rs`), the local fits in `surface/`, the renders in `warp/`, the
+//! per-cell math in `cells.rs`, the motion estimated from the scans in
+//! `egomotion.rs`.
 
 pub mod beams;
 mod bias;

@@ -2,6 +2,11 @@
 //! neighbourhood gives a denoised range (the cell's ray against the plane),
 //! the surface normal (so grazing cells are known), and occlusion edges
 //! (neighbours far off the plane).
+//!
+//! Here [`Surfaces`], the per-cell driver and the orientation of a fitted
+//! surface; each laser's noise in `noise.rs`, a dense sensor's window fits
+//! in `window.rs`, a sparse sensor's ring lines in `ring.rs`, the linear
+//! algebra in `plane.rs`.
 
 mod noise;
 mod plane;

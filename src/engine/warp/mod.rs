@@ -3,6 +3,10 @@
 //! model to each target ray's time and intersected with that ray. Sub-cell
 //! exact on planar surfaces, so the static road does not light up from
 //! discretisation; z-buffered, so the nearest surface wins.
+//!
+//! Here the render and its z-buffer; the vertices moved in
+//! `moved_vertices.rs`, the mesh's joins and bridged dropouts in `mesh.rs`,
+//! the rasterisation in `raster.rs`.
 
 mod mesh;
 mod moved_vertices;
