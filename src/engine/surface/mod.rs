@@ -378,6 +378,7 @@ fn facing_sensor(normal: Vector3<f64>, direction: &Vector3<f64>) -> Vector3<f64>
 /// facing the sensor, the incidence, and the denoised range (the ray
 /// against the surface, where within `tolerance` of the raw range; near
 /// grazing the intersection is ill-conditioned, so the raw range stays).
+#[inline]
 fn oriented(
     center: &Vector3<f64>,
     centroid: &Vector3<f64>,

@@ -14,6 +14,7 @@ pub(super) fn principal_minors(a: &Matrix3<f64>) -> f64 {
 /// How many eigenvalues of a symmetric matrix lie below `bound`: the sign
 /// changes along 1 and the leading principal minors of `a - bound I`; None
 /// where a minor is zero (or not finite), which the rule does not cover.
+#[inline]
 pub(super) fn eigenvalues_below(a: &Matrix3<f64>, bound: f64) -> Option<usize> {
     let b = a - Matrix3::identity() * bound;
     let minors = [
@@ -53,6 +54,7 @@ pub(super) fn scatter(points: &[Vector3<f64>]) -> (Vector3<f64>, Matrix3<f64>) {
 
 /// Least-squares line: unit direction and centroid; None for fewer than 3
 /// points or no spread.
+#[inline]
 pub(super) fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
     if points.len() < 3 {
         return None;
@@ -75,6 +77,7 @@ pub(super) fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector
 
 /// [`fit_plane`] plus the RMS spread of the points within the plane (the
 /// smaller in-plane axis).
+#[inline]
 pub(in crate::engine) fn fit_plane_spread(
     points: &[Vector3<f64>],
 ) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {

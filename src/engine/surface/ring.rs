@@ -38,6 +38,7 @@ const DOWN_TAN: f32 = 0.176;
 /// such sensors see: a level line at the ground's height is ground (normal
 /// up), anything else a vertical surface through the line (a wall, a car's
 /// side, a post).
+#[inline]
 pub(super) fn fit_ring_cell(
     returns: &Returns,
     geometry: &ImageGeometry,

@@ -221,6 +221,7 @@ pub(super) fn gated_window(
 /// of inertia), so the middle eigenvalue below `count (2 sigma)^2` and the
 /// smallest below the squared tolerance (every return on the plane) are a
 /// few products each. False where unsure: the fit decides.
+#[inline]
 pub(super) fn too_narrow(gated: &GatedWindow, params: SurfaceParams) -> bool {
     let count = gated.total.count;
     let Some((_, scatter)) = gated.total.scatter().filter(|_| count >= 4.0) else {

@@ -101,6 +101,7 @@ pub(super) const JOIN_ANTI: u8 = 4;
 /// surface: the scan's table (`joined`, from [`mesh_joins`]) where neither
 /// vertex stands in for a bridged dropout, else the cells the vertices
 /// stand for, judged now.
+#[inline]
 pub(super) fn on_one_surface(
     source: &Source,
     proxy: &[u32],
