@@ -599,23 +599,74 @@ mod tests {
         "/../shared/real-samples/kitti-6-scans/"
     );
 
+    /// The points of a KITTI `.bin` (float32 x, y, z, reflectance); `None`
+    /// where the file is absent.
+    fn kitti_points(path: &str) -> Option<Vec<[f64; 3]>> {
+        let bytes = std::fs::read(path).ok()?;
+        let points = bytes
+            .chunks_exact(16)
+            .map(|c| {
+                let f = |i: usize| {
+                    f64::from(f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().unwrap()))
+                };
+                [f(0), f(1), f(2)]
+            })
+            .collect();
+        Some(points)
+    }
+
+    /// Points per row of `table` (beams `e`, degrees), and how many lie
+    /// further than half the local spacing from their beam.
+    fn row_counts_and_far(table: &BeamTable, e: &[f64], elevations: &[f32]) -> (Vec<usize>, usize) {
+        let n = e.len();
+        let mut counts = vec![0usize; n];
+        let mut far = 0;
+        for &el in elevations {
+            let el = f64::from(el);
+            let row = table.row_of(el);
+            counts[row] += 1;
+            let gap = if row + 1 < n {
+                e[row + 1] - e[row]
+            } else {
+                e[row] - e[row - 1]
+            };
+            far += usize::from((el / DEG - e[row]).abs() > 0.5 * gap);
+        }
+        (counts, far)
+    }
+
+    /// True rings: KITTI stores each laser's points in turn (top laser
+    /// first), each a turn of increasing azimuth; a new laser starts where
+    /// the azimuth falls back. Returns the last ring and how many points
+    /// `table` puts on their ring's row.
+    fn rows_on_azimuth_rings(
+        table: &BeamTable,
+        points: &[[f64; 3]],
+        elevations: &[f32],
+    ) -> (usize, usize) {
+        let n = table.len();
+        let mut ring = 0usize;
+        let mut previous = f64::NEG_INFINITY;
+        let mut right = 0;
+        for (p, &el) in points.iter().zip(elevations) {
+            let azimuth = p[1].atan2(p[0]).rem_euclid(std::f64::consts::TAU);
+            if azimuth < previous - std::f64::consts::PI {
+                ring += 1;
+            }
+            previous = azimuth;
+            right += usize::from(ring < n && table.row_of(f64::from(el)) == n - 1 - ring);
+        }
+        (ring, right)
+    }
+
     #[test]
     fn kitti_hdl64e_scans() {
         for scan in 0..6 {
             let path = format!("{KITTI_DIR}{scan:06}.bin");
-            let Ok(bytes) = std::fs::read(&path) else {
+            let Some(points) = kitti_points(&path) else {
                 println!("skipped: {path} absent");
                 return;
             };
-            let points: Vec<[f64; 3]> = bytes
-                .chunks_exact(16)
-                .map(|c| {
-                    let f = |i: usize| {
-                        f64::from(f32::from_le_bytes(c[4 * i..4 * i + 4].try_into().unwrap()))
-                    };
-                    [f(0), f(1), f(2)]
-                })
-                .collect();
             let elevations: Vec<f32> = points
                 .iter()
                 .map(|p| p[2].atan2(p[0].hypot(p[1])) as f32)
@@ -634,34 +685,8 @@ mod tests {
                 d.sort_by(f64::total_cmp);
                 d[d.len() / 2]
             };
-            // Points further than half the local spacing from their beam.
-            let mut counts = vec![0usize; n];
-            let mut far = 0;
-            for &el in &elevations {
-                let el = f64::from(el);
-                let row = table.row_of(el);
-                counts[row] += 1;
-                let gap = if row + 1 < n {
-                    e[row + 1] - e[row]
-                } else {
-                    e[row] - e[row - 1]
-                };
-                far += usize::from((el / DEG - e[row]).abs() > 0.5 * gap);
-            }
-            // True rings: KITTI stores each laser's points in turn (top laser
-            // first), each a turn of increasing azimuth; a new laser starts
-            // where the azimuth falls back.
-            let mut ring = 0usize;
-            let mut previous = f64::NEG_INFINITY;
-            let mut right = 0;
-            for (p, &el) in points.iter().zip(&elevations) {
-                let azimuth = p[1].atan2(p[0]).rem_euclid(std::f64::consts::TAU);
-                if azimuth < previous - std::f64::consts::PI {
-                    ring += 1;
-                }
-                previous = azimuth;
-                right += usize::from(ring < n && table.row_of(f64::from(el)) == n - 1 - ring);
-            }
+            let (counts, far) = row_counts_and_far(&table, &e, &elevations);
+            let (ring, right) = rows_on_azimuth_rings(&table, &points, &elevations);
             let most = counts.iter().copied().max().unwrap();
             let fewest = counts.iter().copied().min().unwrap();
             println!(

@@ -19,9 +19,12 @@
 
 use nalgebra::{Matrix6, Vector3, Vector6};
 
+use super::config::EngineConfig;
+use super::grid::ImageGeometry;
 use super::surface::Surfaces;
-use super::warp::Rendered;
-use crate::model::StampNs;
+use super::trajectory::{MotionModel, Trajectory};
+use super::warp::{self, Rendered};
+use crate::model::{PairMotion, ScanPair, StampNs, TimeSeries};
 
 /// What was estimated for a pair, in the LiDAR frame at the current scan.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -181,4 +184,99 @@ fn median_in_place(values: &mut [f64]) -> f64 {
     }
     let mid = values.len() / 2;
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Renders of the previous scan tried to estimate the motion.
+const ESTIMATE_ITERATIONS: usize = 8;
+
+/// The pair's motion with what no source measured estimated from the static
+/// world: the previous scan is rendered with a trial motion, corrected
+/// until the static surfaces meet ([`correction`]). Constant over the pair.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn estimate_motion(
+    pair: &ScanPair,
+    source: &warp::Source,
+    target: &warp::Target,
+    geometry: &ImageGeometry,
+    (current, current_time): (&Surfaces, &[StampNs]),
+    config: &EngineConfig,
+    (start_ns, end_ns): (StampNs, StampNs),
+    first_guess: Option<(Vector3<f64>, Vector3<f64>)>,
+) -> Option<(PairMotion, EgoEstimate)> {
+    let stamp_ns = pair.current.stamp_ns;
+    let measured = &pair.motion;
+    let prior = Prior {
+        rotation_known: measured.angular.is_some(),
+        velocity_known: measured.velocity.is_some(),
+    };
+    let (guess_velocity, guess_angular) =
+        first_guess.unwrap_or((Vector3::zeros(), Vector3::zeros()));
+    let mut angular = measured
+        .angular_velocity_at(stamp_ns)
+        .unwrap_or(guess_angular);
+    let mut velocity = measured.velocity_at(stamp_ns).unwrap_or(guess_velocity);
+    let offset_ns = stamp_ns - pair.previous.stamp_ns;
+    let mut fit = None;
+    for _ in 0..ESTIMATE_ITERATIONS {
+        let trial = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
+        let trajectory = Trajectory::integrate(&trial, MotionModel::Full, true, start_ns, end_ns)?;
+        let rendered = warp::render(source, target, geometry, &trajectory, offset_ns);
+        let Some(step) = correction(
+            current,
+            current_time,
+            &rendered,
+            config.range_noise_m,
+            &prior,
+        ) else {
+            break;
+        };
+        angular += step.angular_radps;
+        velocity += step.velocity_mps;
+        fit = Some(step);
+        // Converged: the update moves a surface 10 m away by less than a
+        // millimetre.
+        let dt_s = offset_ns as f64 * 1e-9;
+        if (step.velocity_mps.norm() + step.angular_radps.norm() * 10.0) * dt_s < 1e-3 {
+            break;
+        }
+    }
+    let Correction {
+        inlier_cells,
+        residual_m,
+        ..
+    } = fit?;
+    let motion = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
+    Some((
+        motion,
+        EgoEstimate {
+            velocity_mps: [velocity.x, velocity.y, velocity.z],
+            angular_velocity_radps: [angular.x, angular.y, angular.z],
+            inlier_cells,
+            residual_m,
+            velocity_estimated: !prior.velocity_known,
+            rotation_estimated: !prior.rotation_known,
+        },
+    ))
+}
+
+/// `motion` with the series no source measured replaced by constants.
+fn with_constant_motion(
+    motion: &PairMotion,
+    velocity: Vector3<f64>,
+    angular: Vector3<f64>,
+    start_ns: StampNs,
+    end_ns: StampNs,
+) -> PairMotion {
+    let constant =
+        |value: Vector3<f64>| TimeSeries::new(vec![(start_ns, value), (end_ns, value)], 1.0);
+    PairMotion {
+        velocity: Some(
+            motion
+                .velocity
+                .clone()
+                .unwrap_or_else(|| constant(velocity)),
+        ),
+        angular: Some(motion.angular.clone().unwrap_or_else(|| constant(angular))),
+        ..motion.clone()
+    }
 }

@@ -1,0 +1,226 @@
+//! Tests of the plane fits and their linear algebra.
+
+use nalgebra::Matrix3;
+
+use super::plane::{eigenvalues_below, fit_plane, scatter, symmetric_eigenvalues};
+use super::window::{fit_gated_points, fit_whole_window};
+use super::*;
+
+#[test]
+fn a_plane_fit_recovers_the_plane() {
+    let normal = Vector3::new(0.2, -0.3, 0.9).normalize();
+    let u = normal.cross(&Vector3::x()).normalize();
+    let v = normal.cross(&u);
+    let base = Vector3::new(5.0, 1.0, -1.7);
+    let points: Vec<Vector3<f64>> = (0..9)
+        .map(|k| base + u * f64::from(k % 3) * 0.2 + v * f64::from(k / 3) * 0.3)
+        .collect();
+    let (fitted, centroid) = fit_plane(&points).unwrap();
+    assert!(fitted.dot(&normal).abs() > 1.0 - 1e-9);
+    assert!((centroid - base).dot(&normal).abs() < 1e-9);
+}
+
+#[test]
+fn points_on_a_line_define_no_plane() {
+    let points: Vec<Vector3<f64>> = (0..5)
+        .map(|k| Vector3::new(f64::from(k), 2.0 * f64::from(k), 1.0))
+        .collect();
+    assert!(fit_plane(&points).is_none());
+}
+
+/// Uniform numbers in [-0.5, 0.5), the same sequence every run.
+fn uniform_numbers() -> impl FnMut() -> f64 {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    }
+}
+
+/// Scatter matrices of windows on planes (one small eigenvalue), of
+/// isotropic clouds and of lines.
+fn scatter_matrices() -> Vec<Matrix3<f64>> {
+    let mut uniform = uniform_numbers();
+    (0..300)
+        .map(|case| {
+            let thickness = [1e-4, 0.02, 1.0][case % 3];
+            let width = if case % 7 == 0 { 1e-6 } else { 0.3 };
+            let points: Vec<Vector3<f64>> = (0..15)
+                .map(|_| Vector3::new(uniform(), uniform() * width, uniform() * thickness))
+                .collect();
+            scatter(&points).1
+        })
+        .collect()
+}
+
+#[test]
+fn eigenvalues_match_nalgebras_on_scatter_matrices() {
+    // Against nalgebra's iterative solver.
+    for (case, covariance) in scatter_matrices().into_iter().enumerate() {
+        let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
+        let mut expected: Vec<f64> = covariance
+            .symmetric_eigen()
+            .eigenvalues
+            .iter()
+            .copied()
+            .collect();
+        expected.sort_by(f64::total_cmp);
+        let scale = expected[2];
+        for (found, want) in [a, b, c].iter().zip(&expected) {
+            assert!(
+                (found - want).abs() <= 1e-9 * scale,
+                "{case}: {a} {b} {c} vs {expected:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn eigenvalues_below_a_bound_are_counted_from_the_minors() {
+    for (case, covariance) in scatter_matrices().into_iter().enumerate() {
+        let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
+        // Bounds between and beyond the eigenvalues, clear of them.
+        let bounds = [0.5 * a - 1.0, 0.5 * (a + b), 0.5 * (b + c), 2.0 * c + 1.0];
+        for (expected, bound) in bounds.into_iter().enumerate() {
+            let clear = [a, b, c].iter().all(|e| (e - bound).abs() > 1e-6 * c);
+            if clear {
+                assert_eq!(
+                    eigenvalues_below(&covariance, bound),
+                    Some(expected),
+                    "{case}: {bound} against {a} {b} {c}"
+                );
+            }
+        }
+    }
+}
+
+/// The returns of a `rows x cols` image of a noisy plane 10 m ahead,
+/// with one return `off_plane_m` in front of it.
+fn noisy_plane(rows: usize, cols: usize, noise_m: f64, off_plane_m: f64) -> Vec<Vector3<f64>> {
+    let mut uniform = uniform_numbers();
+    (0..rows * cols)
+        .map(|cell| {
+            let (row, col) = ((cell / cols) as f64, (cell % cols) as f64);
+            let depth = 10.0 + 0.05 * col + noise_m * uniform();
+            let depth = if cell == 2 * cols + 5 {
+                depth - off_plane_m
+            } else {
+                depth
+            };
+            Vector3::new(depth, 0.03 * col, 0.07 * row - 0.5)
+        })
+        .collect()
+}
+
+/// A dense image's geometry, parameters and (unused) gridded scan.
+fn dense_image(
+    rows: usize,
+    cols: usize,
+    noise_m: f64,
+) -> (ImageGeometry, SurfaceParams, RangeImage) {
+    let geometry = ImageGeometry {
+        rows,
+        cols,
+        beams: super::super::beams::BeamTable::uniform(rows, -0.1, 0.1),
+        ring_to_row: None,
+        parallax_rad_m: None,
+    };
+    let params = SurfaceParams {
+        range_noise_m: noise_m,
+        half_cols: 2,
+        sparse_rows: false,
+        ground_z_m: f64::NEG_INFINITY,
+    };
+    let image = RangeImage {
+        range_m: Vec::new(),
+        point: Vec::new(),
+        point_cell: Vec::new(),
+        point_surface: Vec::new(),
+    };
+    (geometry, params, image)
+}
+
+#[test]
+fn whole_window_fits_match_fits_point_by_point() {
+    let (rows, cols) = (5, 24);
+    let (geometry, params, image) = dense_image(rows, cols, 0.002);
+    // Noise enough for the windows' summed squared distances to exceed
+    // the tolerance (rows are then looked at one by one), and a return
+    // off the plane by more than the tolerance.
+    let points = noisy_plane(rows, cols, 0.03, 0.2);
+    let returns = Returns::of_points(&image, points, cols, &[2, 4]);
+    let mut scratch = Scratch::default();
+    let (mut whole, mut off) = (0, 0);
+    for cell in 0..rows * cols {
+        for window in [(1, 2), (2, 4)] {
+            let center = returns.point(cell).unwrap();
+            let by_points = fit_gated_points(
+                &returns,
+                &geometry,
+                cell,
+                &center,
+                params,
+                window,
+                &mut scratch,
+            );
+            let gated = gated_window(&returns, &geometry, cell, window).unwrap();
+            let Some((fit, spread)) = fit_whole_window(&returns, cols, &center, params, &gated)
+            else {
+                off += 1;
+                assert!(by_points.0.edge, "cell {cell} {window:?}: an edge");
+                continue;
+            };
+            whole += 1;
+            assert!(!by_points.0.edge, "cell {cell} {window:?}: no edge");
+            assert!((fit.range_m - by_points.0.range_m).abs() < 1e-5);
+            assert!((spread.unwrap() - by_points.1.unwrap()).abs() < 1e-6);
+            let dot: f32 = (0..3).map(|k| fit.normal[k] * by_points.0.normal[k]).sum();
+            assert!(dot > 1.0 - 1e-6, "cell {cell} {window:?}: normals {dot}");
+        }
+    }
+    assert!(
+        whole > 0 && off > 0,
+        "{whole} whole windows, {off} off the plane"
+    );
+}
+
+#[test]
+fn windows_found_too_narrow_fit_with_a_spread_below_two_sigmas() {
+    let (rows, cols) = (5, 24);
+    let mut narrow = 0;
+    for noise_m in [0.005, 0.03] {
+        let (geometry, params, image) = dense_image(rows, cols, noise_m);
+        let points = noisy_plane(rows, cols, noise_m, 0.5);
+        let returns = Returns::of_points(&image, points, cols, &[2, 4]);
+        let mut scratch = Scratch::default();
+        for cell in 0..rows * cols {
+            for window in [(1, 2), (2, 4)] {
+                let gated = gated_window(&returns, &geometry, cell, window);
+                let (fit, spread) = fit_window(
+                    &returns,
+                    &geometry,
+                    cell,
+                    params,
+                    window,
+                    gated.as_ref(),
+                    &mut scratch,
+                );
+                if gated.is_some_and(|g| too_narrow(&g, params)) {
+                    narrow += 1;
+                    let wide = spread.is_none_or(|s| s >= 2.0 * noise_m);
+                    assert!(!wide && !fit.edge, "cell {cell} {window:?}: {spread:?}");
+                }
+            }
+        }
+    }
+    assert!(narrow > 0);
+}
+
+#[test]
+fn eigenvalues_of_a_diagonal_matrix_are_its_diagonal() {
+    let m = Matrix3::from_diagonal(&Vector3::new(3.0, 1.0, 2.0));
+    let (a, b, c) = symmetric_eigenvalues(&m).unwrap();
+    assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12 && (c - 3.0).abs() < 1e-12);
+}

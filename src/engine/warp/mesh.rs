@@ -1,0 +1,150 @@
+//! The source's triangle mesh: which neighbouring cells share a surface
+//! ([`mesh_joins`], once per scan), and the one-cell dropouts bridged so the
+//! mesh keeps its triangles around them ([`fill_dropouts`]).
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::{Source, Vertex};
+use crate::engine::grid::ImageGeometry;
+use crate::engine::surface::Surfaces;
+
+/// Bridges one-cell dropouts of the source (a laser that returned nothing
+/// there: dark paint, a window, a missed echo; a few percent of real
+/// returns) so the mesh keeps its triangles around them: the missing vertex
+/// is the midpoint of its row neighbours when they lie on one surface.
+/// Returns, per cell, the source cell whose surface the vertex stands for
+/// (itself, or the left neighbour of a bridged dropout).
+pub(super) fn fill_dropouts(
+    source: &Source,
+    geometry: &ImageGeometry,
+    vertices: &mut [Option<Vertex>],
+) -> Vec<u32> {
+    let cols = geometry.cols;
+    let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
+    for row in 0..geometry.rows {
+        for col in 0..cols {
+            let cell = row * cols + col;
+            if vertices[cell].is_some() || source.surfaces.range_m[cell].is_finite() {
+                continue;
+            }
+            let left = row * cols + (col + cols - 1) % cols;
+            let right = row * cols + (col + 1) % cols;
+            let (Some(a), Some(b)) = (vertices[left], vertices[right]) else {
+                continue;
+            };
+            if !same_surface(source.surfaces, left, right) || (a.col - b.col).abs() > 3.0 {
+                continue;
+            }
+            vertices[cell] = Some(Vertex {
+                position: Point3::from((a.position.coords + b.position.coords) * 0.5),
+                normal: (a.normal + b.normal) * 0.5,
+                row: 0.5 * (a.row + b.row),
+                col: 0.5 * (a.col + b.col),
+                time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
+            });
+            proxy[cell] = left as u32;
+        }
+    }
+    proxy
+}
+
+/// Which neighbours each cell shares a surface with (`same_surface`), for
+/// the mesh's triangle edges: bit [`JOIN_RIGHT`] the next column, bit
+/// [`JOIN_DOWN`] the next row, bit [`JOIN_ANTI`] the next column's cell
+/// with the next row's (the diagonal both triangles of a quad share). A
+/// property of the scan alone: computed once with its surfaces, read by
+/// every render of it (two per pair, up to eight more to estimate a motion).
+pub(in crate::engine) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usize) -> Vec<u8> {
+    let mut joins = vec![0; rows * cols];
+    joins
+        .par_chunks_mut(cols.max(1))
+        .enumerate()
+        .for_each(|(row, joins_of_row)| {
+            let noise_here = f64::from(surfaces.noise_m_per_row[row]);
+            let noise_down = surfaces
+                .noise_m_per_row
+                .get(row + 1)
+                .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
+            let finite = |cell: usize| surfaces.range_m[cell].is_finite();
+            for (col, joins) in joins_of_row.iter_mut().enumerate() {
+                let cell = row * cols + col;
+                let right = row * cols + if col + 1 == cols { 0 } else { col + 1 };
+                let here = finite(cell);
+                if here && finite(right) && on_one_plane(surfaces, cell, right, noise_here) {
+                    *joins |= JOIN_RIGHT;
+                }
+                if row + 1 < rows {
+                    let down = cell + cols;
+                    if here && finite(down) && on_one_plane(surfaces, cell, down, noise_down) {
+                        *joins |= JOIN_DOWN;
+                    }
+                    // The diagonal does not involve this cell: an empty cell's
+                    // neighbours still share the quad's other triangle.
+                    if finite(right)
+                        && finite(down)
+                        && on_one_plane(surfaces, right, down, noise_down)
+                    {
+                        *joins |= JOIN_ANTI;
+                    }
+                }
+            }
+        });
+    joins
+}
+
+pub(super) const JOIN_RIGHT: u8 = 1;
+pub(super) const JOIN_DOWN: u8 = 2;
+pub(super) const JOIN_ANTI: u8 = 4;
+
+/// Whether the mesh edge between source cells `x` and `y` lies on one
+/// surface: the scan's table (`joined`, from [`mesh_joins`]) where neither
+/// vertex stands in for a bridged dropout, else the cells the vertices
+/// stand for, judged now.
+#[inline]
+pub(super) fn on_one_surface(
+    source: &Source,
+    proxy: &[u32],
+    (x, y): (usize, usize),
+    joined: bool,
+) -> bool {
+    let (px, py) = (proxy[x] as usize, proxy[y] as usize);
+    if px == x && py == y {
+        joined
+    } else {
+        px == py || same_surface(source.surfaces, px, py)
+    }
+}
+
+/// Whether two neighbouring source cells lie on one surface (so a triangle
+/// between them is real and not a bridge across an occlusion).
+fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
+    on_one_plane(s, a, b, s.noise_m(a).max(s.noise_m(b)))
+}
+
+/// [`same_surface`] with the larger of the two cells' range noise given
+/// (metres): the mesh's table takes it per row, not per cell.
+fn on_one_plane(s: &Surfaces, a: usize, b: usize, noise_m: f64) -> bool {
+    let point = |c: usize| {
+        let d = s.direction[c];
+        Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * f64::from(s.range_m[c])
+    };
+    let (pa, pb) = (point(a), point(b));
+    let gap = pb - pa;
+    let tolerance = 4.0 * noise_m + 0.05 * gap.norm();
+    let off_plane = |c: usize, other: &Vector3<f64>| {
+        let n = s.normal[c];
+        let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+        (n.norm_squared() > 0.5).then(|| other.dot(&n).abs())
+    };
+    match (off_plane(a, &gap), off_plane(b, &gap)) {
+        // Each vertex must lie on the other's plane: a triangle across a crease
+        // (road meeting a wall) is a chamfer that is not there.
+        (Some(da), Some(db)) => da.max(db) <= tolerance,
+        // No plane: fall back to a range-ratio test.
+        _ => {
+            let (ra, rb) = (f64::from(s.range_m[a]), f64::from(s.range_m[b]));
+            (ra - rb).abs() <= 0.05 * ra.max(rb) + 4.0 * noise_m
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! Rendering the previous scan into the current scan's rays: the previous
+//! scan's surface (a triangle mesh over its range image) is moved by a motion
+//! model to each target ray's time and intersected with that ray. Sub-cell
+//! exact on planar surfaces, so the static road does not light up from
+//! discretisation; z-buffered, so the nearest surface wins.
+//!
+//! Here the render and its z-buffer; the vertices moved in
+//! `moved_vertices.rs`, the mesh's joins and bridged dropouts in `mesh.rs`,
+//! the rasterisation in `raster.rs`.
+
+mod mesh;
+mod moved_vertices;
+mod raster;
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::grid::ImageGeometry;
+use super::surface::Surfaces;
+use super::trajectory::Trajectory;
+use crate::model::StampNs;
+
+use mesh::fill_dropouts;
+pub(super) use mesh::mesh_joins;
+use moved_vertices::{TransformCache, arrival_poses, warp_vertex};
+use raster::{rasterize_ring, rasterize_row};
+
+/// One scan's surface, ready to be warped.
+pub struct Source<'a> {
+    pub surfaces: &'a Surfaces,
+    /// Absolute time of each cell's return, ns (meaningful where range is set).
+    pub time_ns: &'a [StampNs],
+}
+
+/// The rays to render into.
+pub struct Target<'a> {
+    pub surfaces: &'a Surfaces,
+    /// Continuous (row, column) of each occupied cell's ray.
+    pub coords: &'a [(f32, f32)],
+    /// Median firing time of each column, ns (for a rolling sweep).
+    pub column_time_ns: &'a [StampNs],
+    /// How far an occupied cell's coordinates lie from the cell's own
+    /// (row, column) at most, in rows and columns: a triangle can only
+    /// cover the cells this near its bounding box.
+    reach: (f64, f64),
+}
+
+impl<'a> Target<'a> {
+    pub fn new(
+        surfaces: &'a Surfaces,
+        coords: &'a [(f32, f32)],
+        column_time_ns: &'a [StampNs],
+    ) -> Self {
+        Self {
+            surfaces,
+            coords,
+            column_time_ns,
+            reach: coords_reach(surfaces, coords),
+        }
+    }
+}
+
+/// The largest distance, in rows and in columns (across the seam), of an
+/// occupied cell's coordinates from the cell's own row and column.
+fn coords_reach(surfaces: &Surfaces, coords: &[(f32, f32)]) -> (f64, f64) {
+    let cols = surfaces.cols;
+    let half_turn = cols as f64 / 2.0;
+    coords
+        .par_iter()
+        .enumerate()
+        .filter(|(cell, _)| surfaces.range_m[*cell].is_finite())
+        .map(|(cell, &(row_f, col_f))| {
+            let (row, col) = ((cell / cols) as f64, (cell % cols) as f64);
+            let mut col_off = f64::from(col_f) - col;
+            if col_off > half_turn {
+                col_off -= cols as f64;
+            } else if col_off < -half_turn {
+                col_off += cols as f64;
+            }
+            ((f64::from(row_f) - row).abs(), col_off.abs())
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
+}
+
+/// Added to a target's reach: a ray passes the triangle test up to its
+/// tolerance outside the triangle (1e-9 of barycentric weight, below 1e-7
+/// cells at the largest triangle).
+const REACH_SLACK: f64 = 1e-6;
+
+/// The previous surface along each target ray.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// Range along the target ray, metres; NaN where no triangle covers it.
+    pub range_m: Vec<f32>,
+    /// Time the covering surface was measured at (interpolated), ns.
+    pub source_time_ns: Vec<StampNs>,
+    /// Unit normal of the covering triangle (zero where none).
+    pub normal: Vec<[f32; 3]>,
+    /// The covering triangle touches an occlusion edge of the source scan: the
+    /// ray may have seen another surface then (disocclusion).
+    pub edge: Vec<bool>,
+}
+
+/// Vertex of the warped mesh: position in the target frame, image coords, time.
+#[derive(Clone, Copy)]
+struct Vertex {
+    position: Point3<f64>,
+    /// The source surface's fitted normal, in the target frame (zero where
+    /// none was fitted, and on dense sensors, whose triangles have their own).
+    normal: Vector3<f64>,
+    row: f64,
+    col: f64,
+    time_ns: StampNs,
+}
+
+pub fn render(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    trajectory: &Trajectory,
+    scan_offset_ns: StampNs,
+) -> Rendered {
+    let cells = geometry.cells();
+    let arrivals = arrival_poses(target.column_time_ns, trajectory);
+    // A sparse sensor's rings are rendered segment by segment, with their
+    // vertices' normals (`rasterize_ring`); triangles have their own.
+    let sparse = geometry.sparse_rows();
+    // Column by column: the returns of one column share a firing time, so the
+    // relative transforms are computed once per column, not once per return.
+    let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
+        .into_par_iter()
+        .map(|col| {
+            let mut cache = TransformCache::new(trajectory, &arrivals);
+            (0..geometry.rows)
+                .map(|row| {
+                    warp_vertex(
+                        source,
+                        target,
+                        geometry,
+                        scan_offset_ns,
+                        row * geometry.cols + col,
+                        &mut cache,
+                        sparse,
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    // Into row-major order, a row per task.
+    let mut vertices: Vec<Option<Vertex>> = vec![None; cells];
+    vertices
+        .par_chunks_mut(geometry.cols)
+        .enumerate()
+        .for_each(|(row, cells_of_row)| {
+            for (vertex, column) in cells_of_row.iter_mut().zip(&columns) {
+                *vertex = column[row];
+            }
+        });
+    let proxy = fill_dropouts(source, geometry, &mut vertices);
+    let candidates: Vec<Vec<Candidate>> = if sparse {
+        (0..geometry.rows)
+            .into_par_iter()
+            .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy, row))
+            .collect()
+    } else {
+        (0..geometry.rows.saturating_sub(1))
+            .into_par_iter()
+            .map(|row| rasterize_row(source, target, geometry, &vertices, &proxy, row))
+            .collect()
+    };
+    let mut range_m = vec![f32::NAN; cells];
+    let mut source_time_ns = vec![0; cells];
+    let mut normal = vec![[0.0; 3]; cells];
+    let mut edge = vec![false; cells];
+    for row in candidates {
+        for candidate in row {
+            let cell = candidate.cell as usize;
+            if range_m[cell].is_nan() || candidate.range_m < range_m[cell] {
+                range_m[cell] = candidate.range_m;
+                source_time_ns[cell] = candidate.time_ns;
+                normal[cell] = candidate.normal;
+                edge[cell] = candidate.edge;
+            }
+        }
+    }
+    Rendered {
+        range_m,
+        source_time_ns,
+        normal,
+        edge,
+    }
+}
+
+/// A triangle covering a target ray.
+struct Candidate {
+    cell: u32,
+    range_m: f32,
+    time_ns: StampNs,
+    normal: [f32; 3],
+    edge: bool,
+}

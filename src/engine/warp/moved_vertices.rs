@@ -1,0 +1,282 @@
+//! The source's returns moved to the target: each return moved by the
+//! trajectory from its own time to the time the target fires the column it
+//! lands in ([`warp_vertex`]), with the relative transforms of one column's
+//! returns cached ([`TransformCache`]) and the angles turned by a short
+//! series ([`turn_rad`]).
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
+
+use super::{Source, Target, Vertex};
+use crate::engine::grid::ImageGeometry;
+use crate::engine::trajectory::Trajectory;
+use crate::model::StampNs;
+
+/// Per target column, the inverse of the pose at its firing time
+/// (`lidar_from_reference`; the identity where the column has no time):
+/// the target end of every relative transform into that column, computed
+/// once per render instead of once per (return time, column) pair.
+pub(super) fn arrival_poses(
+    column_time_ns: &[StampNs],
+    trajectory: &Trajectory,
+) -> Vec<Isometry3<f64>> {
+    column_time_ns
+        .par_iter()
+        .map(|&time_ns| {
+            if time_ns == StampNs::MIN {
+                Isometry3::identity()
+            } else {
+                trajectory.pose(time_ns).inverse()
+            }
+        })
+        .collect()
+}
+
+/// A transform from a time into a target column's frame, keyed by both.
+type ToColumn = ((StampNs, usize), Isometry3<f64>);
+
+/// Relative transforms of one column's returns, `pose(to)^-1 * pose(from)`
+/// as [`Trajectory::relative`] computes them (so the same values), each
+/// composed from a departure pose (the last one kept: a column's returns
+/// share their time) and an arrival pose: a target column's from the
+/// render's table, any other time's computed (the last one kept). The last
+/// transforms composed are kept too. (Keying whole transforms alone missed
+/// on three returns in four under translation, whose rows land in
+/// different target columns.)
+pub(super) struct TransformCache<'a> {
+    trajectory: &'a Trajectory,
+    /// Per target column, from [`arrival_poses`].
+    arrivals: &'a [Isometry3<f64>],
+    departure: Option<(StampNs, Isometry3<f64>)>,
+    to_time: Option<((StampNs, StampNs), Isometry3<f64>)>,
+    to_columns: [Option<ToColumn>; 4],
+    next: usize,
+}
+
+impl<'a> TransformCache<'a> {
+    pub(super) fn new(trajectory: &'a Trajectory, arrivals: &'a [Isometry3<f64>]) -> Self {
+        Self {
+            trajectory,
+            arrivals,
+            departure: None,
+            to_time: None,
+            to_columns: [None; 4],
+            next: 0,
+        }
+    }
+
+    /// Points measured at `from_ns` into the frame at `to_ns`.
+    fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
+        match self.to_time {
+            Some((key, transform)) if key == (from_ns, to_ns) => transform,
+            _ => {
+                let transform = self.trajectory.pose(to_ns).inverse() * self.departure(from_ns);
+                self.to_time = Some(((from_ns, to_ns), transform));
+                transform
+            }
+        }
+    }
+
+    /// Points measured at `from_ns` into the frame target column `col`
+    /// fired in.
+    fn until_column(&mut self, from_ns: StampNs, col: usize) -> Isometry3<f64> {
+        let key = (from_ns, col);
+        if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
+            return *transform;
+        }
+        let transform = self.arrivals[col] * self.departure(from_ns);
+        self.to_columns[self.next] = Some((key, transform));
+        self.next = (self.next + 1) % self.to_columns.len();
+        transform
+    }
+
+    fn departure(&mut self, from_ns: StampNs) -> Isometry3<f64> {
+        match self.departure {
+            Some((time_ns, pose)) if time_ns == from_ns => pose,
+            _ => {
+                let pose = self.trajectory.pose(from_ns);
+                self.departure = Some((from_ns, pose));
+                pose
+            }
+        }
+    }
+}
+
+/// The source return of `cell` moved into the target: where it lands (image
+/// coordinates), with its normal where `with_normal`; `None` without a
+/// return, or where it lands across the seam of the sweep.
+pub(super) fn warp_vertex(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    scan_offset_ns: StampNs,
+    cell: usize,
+    cache: &mut TransformCache,
+    with_normal: bool,
+) -> Option<Vertex> {
+    let range = f64::from(source.surfaces.range_m[cell]);
+    if !range.is_finite() {
+        return None;
+    }
+    let d = source.surfaces.direction[cell];
+    let point = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * range;
+    let measured_ns = source.time_ns[cell];
+    // It will be seen again about one scan later; refine with the firing time
+    // of the column it lands in (a rolling sweep fires columns at different times).
+    let seen_ns = measured_ns + scan_offset_ns;
+    let mut transform = cache.until(measured_ns, seen_ns);
+    let mut moved = transform * point;
+    // The moved return's angles: the source return's, turned by the motion.
+    let source_azimuth = source.surfaces.azimuth_rad[cell];
+    let mut azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
+    let col = geometry.col_of(azimuth);
+    let column_ns = target.column_time_ns[col];
+    if column_ns != StampNs::MIN && column_ns != seen_ns {
+        // A return that lands across the seam of the sweep would be compared
+        // with one fired a whole period earlier or later: no difference there.
+        if (column_ns - seen_ns).abs() > scan_offset_ns.abs() / 4 {
+            return None;
+        }
+        transform = cache.until_column(measured_ns, col);
+        moved = transform * point;
+        azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
+    }
+    let normal = if with_normal {
+        let n = source.surfaces.normal[cell];
+        transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]))
+    } else {
+        Vector3::zeros()
+    };
+    let level = |p: &Point3<f64>| (p.x * p.x + p.y * p.y).sqrt();
+    let elevation = source.surfaces.elevation_rad[cell]
+        + turn_rad((level(&point), point.z), (level(&moved), moved.z));
+    Some(Vertex {
+        position: moved,
+        normal,
+        row: geometry.row_f_at(elevation, moved.coords.norm(), cell / geometry.cols),
+        col: geometry.col_f(azimuth),
+        time_ns: measured_ns,
+    })
+}
+
+/// The angle from plane vector `a` to `b`, radians: `atan2(a x b, a . b)`,
+/// by its Taylor series where the turn is small (the common case: a
+/// return moves a few degrees between scans), which is cheaper than
+/// `atan2` and as exact (the series' remainder is below 2^-53 of the
+/// angle).
+fn turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
+    let (cross, dot) = (ax * by - ay * bx, ax * bx + ay * by);
+    if dot > 0.0 && cross.abs() <= SMALL_TURN_TAN * dot {
+        let u = cross / dot;
+        let v = u * u;
+        // atan(u) = u (1 - v/3 + v^2/5 - ...), in two interleaved halves
+        // (Estrin's scheme) to shorten the chain of dependent steps.
+        let v2 = v * v;
+        let even = ATAN_SERIES
+            .iter()
+            .step_by(2)
+            .rev()
+            .fold(0.0, |sum, &c| c + v2 * sum);
+        let odd = ATAN_SERIES
+            .iter()
+            .skip(1)
+            .step_by(2)
+            .rev()
+            .fold(0.0, |sum, &c| c + v2 * sum);
+        u * (even + v * odd)
+    } else {
+        cross.atan2(dot)
+    }
+}
+
+/// Largest `tan` of a turn taken by the series (3.6 degrees): its ninth
+/// term, `(1/16)^16 / 17`, is below 2^-53.
+const SMALL_TURN_TAN: f64 = 1.0 / 16.0;
+
+/// The series' coefficients, `(-1)^k / (2k + 1)`.
+const ATAN_SERIES: [f64; 8] = [
+    1.0,
+    -1.0 / 3.0,
+    1.0 / 5.0,
+    -1.0 / 7.0,
+    1.0 / 9.0,
+    -1.0 / 11.0,
+    1.0 / 13.0,
+    -1.0 / 15.0,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cached_transforms_are_the_trajectorys_relative_ones_bit_for_bit() {
+        let mut scenario = crate::synth::scene::load("urban-turn").unwrap();
+        scenario.lidar.beams = 16;
+        scenario.lidar.columns = 64;
+        let world = crate::synth::sensor::World::new(scenario);
+        let pair = crate::synth::simulated_pair(&world, 12, 1);
+        let (start_ns, end_ns) = (
+            pair.previous.stamp_ns - 1_000_000,
+            pair.current.stamp_ns + 101_000_000,
+        );
+        let trajectory = Trajectory::integrate(
+            &pair.motion,
+            crate::engine::trajectory::MotionModel::Full,
+            true,
+            start_ns,
+            end_ns,
+        )
+        .unwrap();
+        // Columns fired every 1.5625 ms over the current sweep, one without a time.
+        let mut column_time_ns: Vec<StampNs> = (0..64)
+            .map(|c| pair.current.stamp_ns + c * 1_562_500)
+            .collect();
+        column_time_ns[7] = StampNs::MIN;
+        let arrivals = arrival_poses(&column_time_ns, &trajectory);
+        let mut cache = TransformCache::new(&trajectory, &arrivals);
+        let same = |a: Isometry3<f64>, b: Isometry3<f64>| {
+            a.translation
+                .vector
+                .iter()
+                .zip(b.translation.vector.iter())
+                .chain(a.rotation.coords.iter().zip(b.rotation.coords.iter()))
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        // Departures repeating and changing, arrivals in columns and at
+        // times, the column cache wrapping round.
+        for k in 0..400i64 {
+            let from_ns = pair.previous.stamp_ns + (k / 3) * 700_000;
+            let to_ns = from_ns + 100_000_000 + (k % 5) * 333_333;
+            assert!(same(
+                cache.until(from_ns, to_ns),
+                trajectory.relative(from_ns, to_ns)
+            ));
+            let col = ((k * 7) % 64) as usize;
+            if column_time_ns[col] != StampNs::MIN {
+                let expected = trajectory.relative(from_ns, column_time_ns[col]);
+                assert!(
+                    same(cache.until_column(from_ns, col), expected),
+                    "k {k} col {col}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_turn_matches_atan2_within_rounding() {
+        let mut worst = 0.0f64;
+        for i in 0..20_000 {
+            // Directions all round, turned by up to 20 degrees either way
+            // (past the series' reach, so both paths are checked).
+            let from = f64::from(i) * 0.000_314_159 * 1.000_7;
+            let by = (f64::from(i % 401) - 200.0) * 0.001_75;
+            let length = 0.5 + f64::from(i % 7);
+            let a = (from.cos() * length, from.sin() * length);
+            let b = ((from + by).cos() * 2.0, (from + by).sin() * 2.0);
+            let exact = (a.0 * b.1 - a.1 * b.0).atan2(a.0 * b.0 + a.1 * b.1);
+            worst = worst.max((turn_rad(a, b) - exact).abs());
+        }
+        assert!(worst <= 1e-15, "worst difference {worst:e} rad");
+    }
+}
