@@ -60,7 +60,9 @@ fn topic_error(error: &anyhow::Error) -> Option<&TopicError> {
     if let Some(RenderError::Replay(e)) = error.downcast_ref::<RenderError>() {
         return replay_topic_error(e);
     }
-    error.downcast_ref::<ReplayError>().and_then(replay_topic_error)
+    error
+        .downcast_ref::<ReplayError>()
+        .and_then(replay_topic_error)
 }
 
 fn replay_topic_error(error: &ReplayError) -> Option<&TopicError> {

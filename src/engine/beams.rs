@@ -573,23 +573,16 @@ mod tests {
         assert!(single.row_f(f64::NAN).is_nan());
     }
 
+    /// A full 64 x 2000 scan (its speed is the engine benchmark's business,
+    /// not a test's).
     #[test]
-    fn fast_enough() {
+    fn infers_the_beams_of_a_full_scan() {
         let t = hdl64_like();
         let (elevations, _) = synth(&t, &[2000; 64], 0.05, 81);
-        let start = std::time::Instant::now();
-        let runs = 20;
-        for _ in 0..runs {
-            assert_eq!(
-                BeamTable::infer(&elevations, 128).map(|t| t.len()),
-                Some(64)
-            );
-        }
-        let per_run = start.elapsed() / runs;
-        println!("infer on {} points: {per_run:?}", elevations.len());
-        if !cfg!(debug_assertions) {
-            assert!(per_run.as_secs_f64() < 0.02, "{per_run:?}");
-        }
+        assert_eq!(
+            BeamTable::infer(&elevations, 128).map(|t| t.len()),
+            Some(64)
+        );
     }
 
     /// Six real KITTI HDL-64E scans (float32 x, y, z, reflectance), kept
@@ -660,13 +653,11 @@ mod tests {
     }
 
     #[test]
+    #[ignore = "reads ../shared/real-samples/kitti-6-scans beside the repository: cargo test -- --ignored"]
     fn kitti_hdl64e_scans() {
         for scan in 0..6 {
             let path = format!("{KITTI_DIR}{scan:06}.bin");
-            let Some(points) = kitti_points(&path) else {
-                println!("skipped: {path} absent");
-                return;
-            };
+            let points = kitti_points(&path).unwrap_or_else(|| panic!("{path} absent"));
             let elevations: Vec<f32> = points
                 .iter()
                 .map(|p| p[2].atan2(p[0].hypot(p[1])) as f32)
