@@ -27,6 +27,7 @@ pub mod ros;
 pub mod ros_schemas;
 pub mod synth;
 pub mod topics;
+pub mod truth;
 
 #[cfg(test)]
 mod test_rng;
