@@ -11,7 +11,6 @@ pub mod decode;
 pub mod engine;
 pub mod eval;
 pub mod events;
-pub mod fixtures;
 pub mod input;
 pub mod inspect;
 pub mod kitti;
@@ -26,6 +25,10 @@ pub mod replay;
 pub mod ros;
 pub mod ros_schemas;
 pub mod synth;
+// MCAP logs built in memory, for tests, examples and benches only: behind
+// the `testkit` feature, so the shipped binary does not carry it.
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod topics;
 pub mod truth;
 
