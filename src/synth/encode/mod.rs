@@ -1,7 +1,8 @@
 //! Turning the simulation into MCAP messages, in log-time order: the ROS 2
-//! CDR sensor messages (`/lidar/points` in [`lidar_cloud`], the motion
-//! messages in [`motion`]), the truth point cloud ([`truth_cloud`]) and the
-//! JSON truth records. [`SynthLog`] encodes, [`SequencedWriter`] writes.
+//! CDR sensor messages (`/lidar/points` in `lidar_cloud.rs`, the motion
+//! messages in `motion.rs`), the truth point cloud (`truth_cloud.rs`) and the
+//! JSON truth records. [`SynthLog`] encodes, [`SequencedWriter`] writes; a
+//! cloud's slots are laid out by [`CloudShape`].
 
 mod lidar_cloud;
 mod motion;

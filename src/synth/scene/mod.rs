@@ -3,8 +3,8 @@
 //! everything optional has a default). The built-in scenarios are JSON files
 //! embedded in the binary (`src/synth/scenarios/`), so they double as examples.
 //!
-//! The LiDAR's cloud layouts are in [`layout`], its imperfections in
-//! [`realism`], the checks serde cannot make in [`validate`].
+//! The LiDAR's cloud layouts are in `layout.rs`, its imperfections in
+//! `realism.rs`, the checks serde cannot make in `validate.rs`.
 
 mod layout;
 mod realism;

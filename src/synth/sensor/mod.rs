@@ -3,8 +3,9 @@
 //! Pure math, no I/O; deterministic (rayon over columns, results in order,
 //! noise drawn sequentially from a per-scan seeded generator).
 //!
-//! The lasers' calibration is in `calibration`, the scene's shapes in
-//! `objects`, the measurement errors added to the exact hits in `imperfections`.
+//! The lasers' calibration is in `calibration.rs`, the scene's shapes in
+//! `objects.rs`, the measurement errors added to the exact hits in
+//! `imperfections.rs`.
 
 mod calibration;
 mod imperfections;
