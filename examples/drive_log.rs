@@ -11,16 +11,16 @@ fn main() {
         args.get(i)
             .map_or(default, |a| a.parse().expect("a number"))
     };
-    let spec = looming::fixtures::DriveSpec {
+    let spec = looming::testkit::DriveSpec {
         scans: number(2, 600),
         beams: number(3, 64) as u16,
         columns: number(4, 2048),
         wall_distance_m: 1000.0,
-        layout: looming::fixtures::Layout {
+        layout: looming::testkit::Layout {
             chunk_size: 4 << 20,
-            ..looming::fixtures::Layout::indexed()
+            ..looming::testkit::Layout::indexed()
         },
-        ..looming::fixtures::DriveSpec::default()
+        ..looming::testkit::DriveSpec::default()
     };
-    std::fs::write(out, looming::fixtures::drive_log(&spec)).expect("write the log");
+    std::fs::write(out, looming::testkit::drive_log(&spec)).expect("write the log");
 }

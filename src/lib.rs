@@ -12,7 +12,6 @@ pub mod decode;
 pub mod engine;
 pub mod eval;
 pub mod events;
-pub mod fixtures;
 pub mod input;
 pub mod kitti;
 pub mod model;
@@ -23,7 +22,12 @@ pub mod quality;
 pub mod quality_report;
 pub mod ros;
 pub mod synth;
+// MCAP logs built in memory, for tests, examples and benches only: behind
+// the `testkit` feature, so the shipped binary does not carry it.
+#[cfg(feature = "testkit")]
+pub mod testkit;
 pub mod topics;
+pub mod truth;
 
 #[cfg(test)]
 mod test_rng;

@@ -192,7 +192,7 @@ fn eval_runs_through_the_cli_and_refuses_logs_without_truth() {
     let log = dir.join("plain.mcap");
     std::fs::write(
         &log,
-        looming::fixtures::drive_log(&looming::fixtures::DriveSpec::default()),
+        looming::testkit::drive_log(&looming::testkit::DriveSpec::default()),
     )
     .unwrap();
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_looming"))

@@ -53,7 +53,7 @@ fn cloud(stamp_ns: u64) -> PointCloud {
 #[test]
 fn foxglove_point_clouds_are_paired_with_their_pose_as_lever_arm() {
     let dir = scratch("foxglove");
-    let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "");
+    let mut log = looming::testkit::LogBuilder::new(Layout::indexed(), "");
     let schema = PointCloud::get_schema().unwrap();
     log.schema(1, &schema.name, &schema.encoding, &schema.data);
     log.channel(1, 1, "/lidar", "protobuf");

@@ -381,7 +381,7 @@ fn a_truncated_file_keeps_every_complete_message_before_the_cut() {
 }
 
 /// Register the schemas and channels of `contents` in `log`, same ids.
-fn copy_channels(contents: &FileContents, log: &mut looming::fixtures::LogBuilder) {
+fn copy_channels(contents: &FileContents, log: &mut looming::testkit::LogBuilder) {
     for (id, channel) in &contents.channels {
         let schema = channel.schema.clone().unwrap();
         log.schema(schema.id, &schema.name, &schema.encoding, &schema.data);
@@ -393,7 +393,7 @@ fn copy_channels(contents: &FileContents, log: &mut looming::fixtures::LogBuilde
 fn log_with_bad_messages() -> Vec<u8> {
     let good = default_drive();
     let contents = read_all(&good);
-    let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
+    let mut log = looming::testkit::LogBuilder::new(Layout::indexed(), "ros2");
     copy_channels(&contents, &mut log);
     let (mut imu_seen, mut scans_seen) = (0, 0);
     for m in &contents.messages {
@@ -477,7 +477,7 @@ fn ambiguous_and_unknown_topics_list_the_candidates() {
     let good = default_drive();
     let contents = read_all(&good);
     // Add a second LiDAR channel carrying the same scans.
-    let mut log = looming::fixtures::LogBuilder::new(Layout::indexed(), "ros2");
+    let mut log = looming::testkit::LogBuilder::new(Layout::indexed(), "ros2");
     copy_channels(&contents, &mut log);
     log.channel(9, 1, "/sensing/lidar/rear", "cdr");
     for m in &contents.messages {

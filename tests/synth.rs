@@ -336,7 +336,8 @@ fn planted_near_misses_are_in_the_truth() {
 
 use looming::ros::msgs::PointCloud2;
 use looming::synth::scene::{CloudLayout, LAYOUT_NAMES, Realism};
-use looming::synth::{CloudShape, NO_RETURN_SURFACE, Slot};
+use looming::synth::{CloudShape, Slot};
+use looming::truth::NO_RETURN_SURFACE;
 
 /// Value of field `name` of point `index` (little-endian), as f64.
 fn field_value(cloud: &PointCloud2<'_>, name: &str, index: usize) -> f64 {
@@ -446,7 +447,7 @@ fn every_layout_is_read_back_by_inspect_and_the_decoder() {
             } else {
                 assert_eq!((pixels, nan.len()), (returns, 0), "{layout}");
             }
-            let (_, truth) = looming::eval::decode_truth(&truth.data).unwrap();
+            let (_, truth) = looming::truth::decode_points(&truth.data).unwrap();
             for &i in &nan {
                 assert_eq!(truth[i].surface, NO_RETURN_SURFACE, "{layout}");
                 assert!(truth[i].ray_looming.is_nan());

@@ -9,8 +9,9 @@ use crate::decode::{self, DecodeLimits};
 use crate::input::{Flow, InputFile, InputOptions, InputRecord};
 use crate::model::{Decoded, StampNs};
 use crate::topics::{TopicOverrides, select};
+use crate::truth::{self, PointTruth};
 
-use super::{EvalError, ScanTruth, TRUTH_POINTS_TOPIC, decode_truth, position_key};
+use super::{EvalError, ScanTruth, position_key};
 
 /// Scans of truth read ahead of the evaluation.
 const READ_AHEAD: usize = 4;
@@ -72,7 +73,7 @@ fn read_truth(
     let truth_channel = catalog
         .channels
         .values()
-        .find(|c| c.topic == TRUTH_POINTS_TOPIC)
+        .find(|c| c.topic == truth::POINTS_TOPIC)
         .map(|c| c.id)
         .ok_or_else(|| EvalError::NoTruth(name.clone()))?;
     let topics =
@@ -83,14 +84,14 @@ fn read_truth(
     let lidar = topics.lidar;
     let limits = DecodeLimits::default();
     let mut positions: BTreeMap<StampNs, HashMap<[u32; 3], u32>> = BTreeMap::new();
-    let mut truths: BTreeMap<StampNs, Vec<super::PointTruth>> = BTreeMap::new();
+    let mut truths: BTreeMap<StampNs, Vec<PointTruth>> = BTreeMap::new();
     let mut failure = None;
     input.read_records(false, &mut |record| {
         let InputRecord::Message(message) = record else {
             return Flow::Continue(());
         };
         if message.channel_id == truth_channel {
-            match decode_truth(&message.data) {
+            match truth::decode_points(&message.data) {
                 Ok((stamp, points)) => {
                     truths.insert(stamp, points);
                 }

@@ -10,12 +10,9 @@ use std::path::Path;
 
 use crate::engine::{self, EngineConfig, PairLooming};
 use crate::input::InputFile;
-use crate::model::ScanPair;
-use crate::model::{Scan, StampNs};
+use crate::model::{Scan, ScanPair, StampNs};
 use crate::pipeline::{ReplayError, ReplayReport, ScanOptions, replay_input};
-use crate::ros::msgs::PointCloud2;
-
-pub const TRUTH_POINTS_TOPIC: &str = "/truth/points";
+use crate::truth::{self, PointTruth};
 
 /// |own-motion looming| above which a truth cell counts as "moving
 /// observably": motion that changes the range along the ray.
@@ -65,69 +62,6 @@ impl ScanTruth {
 /// The exact bits of a position.
 pub fn position_key(p: &[f32; 3]) -> [u32; 3] {
     [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()]
-}
-
-/// Truth of one point (see docs/ground-truth.md).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PointTruth {
-    pub point_looming: f32,
-    pub ray_looming: f32,
-    pub own_motion_looming: f32,
-    pub incidence_cos: f32,
-    pub surface: u8,
-    pub moving: bool,
-}
-
-/// Decode a `/truth/points` cloud.
-pub fn decode_truth(payload: &[u8]) -> Result<(StampNs, Vec<PointTruth>), String> {
-    let cloud = PointCloud2::decode_cdr(payload).map_err(|e| e.to_string())?;
-    let field = |name: &str| {
-        cloud
-            .fields
-            .iter()
-            .find(|f| f.name == name)
-            .map(|f| f.offset as usize)
-            .ok_or_else(|| format!("/truth/points has no `{name}` field"))
-    };
-    let (pl, rl, om, ic, sf, mv) = (
-        field("point_looming")?,
-        field("ray_looming")?,
-        field("own_motion_looming")?,
-        field("incidence_cos")?,
-        field("surface")?,
-        field("moving")?,
-    );
-    let step = cloud.point_step as usize;
-    let count = (cloud.width as usize) * (cloud.height as usize);
-    if step == 0
-        || cloud.data.len() < count * step
-        || [pl, rl, om, ic].iter().any(|o| o + 4 > step)
-        || sf >= step
-        || mv >= step
-    {
-        return Err("/truth/points layout does not fit its data".into());
-    }
-    let f32_at = |base: usize, offset: usize| {
-        f32::from_le_bytes(
-            cloud.data[base + offset..base + offset + 4]
-                .try_into()
-                .expect("4 bytes"),
-        )
-    };
-    let points = (0..count)
-        .map(|i| {
-            let base = i * step;
-            PointTruth {
-                point_looming: f32_at(base, pl),
-                ray_looming: f32_at(base, rl),
-                own_motion_looming: f32_at(base, om),
-                incidence_cos: f32_at(base, ic),
-                surface: cloud.data[base + sf],
-                moving: cloud.data[base + mv] != 0,
-            }
-        })
-        .collect();
-    Ok((cloud.header.stamp.to_ns(), points))
 }
 
 /// Error statistics from a histogram of |error| (log-spaced bins: bounded memory
@@ -452,7 +386,7 @@ fn own_truth(
         .catalog()
         .channels
         .values()
-        .find(|c| c.topic == TRUTH_POINTS_TOPIC)
+        .find(|c| c.topic == truth::POINTS_TOPIC)
         .map(|c| c.id)
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
     let truths = std::cell::RefCell::new(BTreeMap::<StampNs, ScanTruth>::new());
@@ -462,7 +396,7 @@ fn own_truth(
         scans,
         &mut |message| {
             if message.channel_id == truth_channel {
-                match decode_truth(&message.data) {
+                match truth::decode_points(&message.data) {
                     Ok((stamp, points)) => {
                         let truth = ScanTruth {
                             points,

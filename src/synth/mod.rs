@@ -2,12 +2,12 @@
 //!
 //! A scenario ([`scene`]) is simulated by a rolling-sweep LiDAR ([`sensor`]) ray
 //! cast ([`geometry`]) against a scene moving with exact kinematics
-//! ([`kinematics`]); [`messages`] turns the result into ROS 2 CDR messages and
+//! ([`kinematics`]); [`encode`] turns the result into ROS 2 CDR messages and
 //! truth records, written with the same MCAP writer as `looming process`.
 
+mod encode;
 pub mod geometry;
 pub mod kinematics;
-mod messages;
 pub mod scene;
 pub mod sensor;
 mod truth;
@@ -17,8 +17,8 @@ use std::time::Instant;
 
 use crate::output::{OutputError, OutputOptions, OutputWriter, check_overwrite};
 
-pub use messages::{CloudShape, NO_RETURN_SURFACE, Slot};
-pub use messages::{START_NS, topics};
+pub use encode::{CloudShape, Slot};
+pub use encode::{START_NS, topics};
 pub use scene::{CloudLayout, Realism, Scenario, ScenarioError};
 pub use truth::{TruthEvent, TruthScan};
 
@@ -129,11 +129,11 @@ pub fn synthesize_with(
     let mut writer = OutputWriter::create(&options.output, &output_options, &Default::default())?;
     let world = sensor::World::new(scenario.clone());
     let first_scan = world.first_scan_at(options.start_s.unwrap_or(0.0));
-    let mut log = messages::SynthLog::new(&mut writer, &world, first_scan)?;
-    let mut sequenced = messages::SequencedWriter::new(&mut writer);
+    let mut log = encode::SynthLog::new(&mut writer, &world, first_scan)?;
+    let mut sequenced = encode::SequencedWriter::new(&mut writer);
     sequenced.write_metadata(&scenario, options.seed, options.start_s.unwrap_or(0.0))?;
     // Simulation and encoding on one thread, writing (zstd) on this one.
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<messages::Encoded>>(2);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<encode::Encoded>>(2);
     let (points, events) =
         std::thread::scope(|scope| -> Result<(u64, Vec<TruthEvent>), SynthError> {
             let producer = scope.spawn(|| {
@@ -183,8 +183,8 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::mo
 
     use crate::model::{AngularSource, PairMotion, TimeSeries};
     let to_scan = |scan: &sensor::SimScan| crate::model::Scan {
-        stamp_ns: messages::stamp_ns(scan.stamp_s),
-        frame_id: messages::LIDAR_FRAME.into(),
+        stamp_ns: encode::stamp_ns(scan.stamp_s),
+        frame_id: encode::LIDAR_FRAME.into(),
         sensor_pose: nalgebra::Isometry3::identity(),
         points_m: scan.points.iter().map(|p| p.point_m).collect(),
         intensity: Some(scan.points.iter().map(|p| p.intensity).collect()),
@@ -207,11 +207,11 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::mo
         let t_s = from_s + k as f64 * 0.005;
         let lidar = world.lidar_state(t_s);
         velocity.push((
-            messages::stamp_ns(t_s),
+            encode::stamp_ns(t_s),
             lidar.to_lidar(&lidar.velocity_world_mps),
         ));
         angular.push((
-            messages::stamp_ns(t_s),
+            encode::stamp_ns(t_s),
             lidar.to_lidar(&lidar.angular_velocity_world_radps),
         ));
     }

@@ -4,8 +4,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use super::encode::stamp_ns;
 use super::kinematics::actor_motion;
-use super::messages::stamp_ns;
 use super::scene::Scenario;
 use super::sensor::{SimScan, World};
 
@@ -55,7 +55,7 @@ impl TruthScan {
             scan_index: scan.index,
             stamp_ns: stamp_ns(scan.stamp_s),
             period_s: world.period_s,
-            lidar_frame: super::messages::LIDAR_FRAME.into(),
+            lidar_frame: super::encode::LIDAR_FRAME.into(),
             ego_position_m: ego.position_m.into(),
             ego_yaw_rad: ego.yaw_rad,
             ego_speed_mps: ego.speed_mps,

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 #[allow(unused_imports)]
-pub use looming::fixtures::{DriveSpec, Encoding, Layout, drive_log};
+pub use looming::testkit::{DriveSpec, Encoding, Layout, drive_log};
 
 /// A message as an independent reader sees it.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]

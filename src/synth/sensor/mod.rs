@@ -2,18 +2,25 @@
 //! every column is fired at its own time while the ego and the actors move.
 //! Pure math, no I/O; deterministic (rayon over columns, results in order,
 //! noise drawn sequentially from a per-scan seeded generator).
+//!
+//! The lasers' calibration is in `calibration.rs`, the scene's shapes in
+//! `objects.rs`, the measurement errors added to the exact hits in
+//! `imperfections.rs`.
 
-use nalgebra::{Isometry3, Point3, Vector3};
-use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
+mod calibration;
+mod imperfections;
+mod objects;
+
+use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 
-use super::geometry::{Hit, Ray, SceneObject, SceneSnapshot, Shape};
+use super::geometry::{Hit, Ray, SceneSnapshot};
 use super::kinematics::{EgoTrack, LidarState, actor_motion, vehicle_from_lidar};
-use super::scene::{Actor, Realism, Scenario, StaticObject};
+use super::scene::Scenario;
 
-/// Parked-car box size, metres.
-const CAR_SIZE_M: [f64; 3] = [4.5, 1.8, 1.5];
+pub use calibration::{beam_elevations_rad, calibrate, two_block_elevations_rad};
+pub use imperfections::intensity_range_error_m;
+use objects::{actor_object, static_objects};
 
 /// One simulated point with its truth.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -358,279 +365,10 @@ impl World {
             moving: hit.moving,
         }
     }
-
-    /// Gaussian range noise, drawn in point order from a generator seeded by
-    /// (seed, scan index): the same on any machine and thread count. With
-    /// `realism.range_bias`, the laser's bias and the intensity-dependent
-    /// error are added too. The error is along the laser's own ray (from its
-    /// origin, off the axis with `realism.off_axis`).
-    fn add_range_noise(&self, points: &mut [SimPoint], index: u64, seed: u64) {
-        let sigma_m = self.scenario.lidar.range_noise_m;
-        let noisy = !(sigma_m.is_nan() || sigma_m <= 0.0);
-        let normal = Normal::new(0.0, if noisy { sigma_m } else { 1.0 }).ok();
-        let noisy = noisy && normal.is_some();
-        let biased = self.scenario.lidar.realism.range_bias;
-        let off_axis = self.lasers.iter().any(|l| !l.on_axis());
-        if !noisy && !biased && !off_axis {
-            return;
-        }
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-            seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15),
-        );
-        for point in points {
-            let noise_m = match (&normal, noisy) {
-                (Some(normal), true) => normal.sample(&mut rng),
-                _ => 0.0,
-            };
-            let laser = &self.lasers[usize::from(point.ring)];
-            if !biased && laser.on_axis() {
-                let range_m = point.truth.range_m;
-                let noisy_m = (range_m + noise_m).max(1e-3);
-                let scale = noisy_m / range_m;
-                point.point_m = point.truth.point_m.map(|c| (c * scale) as f32);
-                continue;
-            }
-            let error_m = if biased {
-                laser.range_bias_m + intensity_range_error_m(point.intensity)
-            } else {
-                0.0
-            };
-            let origin = self.laser_origin(usize::from(point.ring), point.column);
-            let along = Vector3::from(point.truth.point_m) - origin;
-            let distance_m = along.norm();
-            let measured_m = (distance_m + noise_m + error_m).max(1e-3);
-            let measured = origin + along * (measured_m / distance_m);
-            point.point_m = [measured.x as f32, measured.y as f32, measured.z as f32];
-        }
-    }
-
-    /// Dropouts (returns lost, more at long range) and specks (a return
-    /// replaced by one from a particle at a random short range along the
-    /// laser's ray), drawn in point order from their own seeded generator.
-    fn add_dropouts_and_specks(
-        &self,
-        points: &mut Vec<SimPoint>,
-        stamp_s: f64,
-        index: u64,
-        seed: u64,
-    ) {
-        use rand::Rng;
-        let realism = &self.scenario.lidar.realism;
-        let (dropout, speck) = (realism.dropout_fraction, realism.speck_fraction);
-        if !(dropout > 0.0 || speck > 0.0) {
-            return;
-        }
-        let max_range_m = self.scenario.lidar.max_range_m;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-            seed ^ 0x5EC5_D809 ^ index.wrapping_mul(0xC2B2_AE3D_27D4_EB4F),
-        );
-        points.retain_mut(|point| {
-            let (lost, speck_draw, at): (f64, f64, f64) =
-                (rng.random(), rng.random(), rng.random());
-            let lost_probability =
-                dropout * (1.0 + 3.0 * (point.truth.range_m / max_range_m).min(1.0));
-            if lost < lost_probability {
-                return false;
-            }
-            if speck_draw < speck {
-                self.make_speck(point, stamp_s, at);
-            }
-            true
-        });
-    }
-
-    /// Replace `point` by a speck at rest in the world, at a fraction `at` of
-    /// the way from 0.5 m to min(8 m, the surface) along the laser's ray.
-    fn make_speck(&self, point: &mut SimPoint, stamp_s: f64, at: f64) {
-        let ring = usize::from(point.ring);
-        let origin = self.laser_origin(ring, point.column);
-        let direction = self.beam_direction(ring, point.column);
-        let surface_m = (Vector3::from(point.truth.point_m) - origin).norm();
-        let far_m = surface_m.min(8.0);
-        let near_m = 0.5_f64.min(far_m);
-        let distance_m = near_m + at * (far_m - near_m);
-        let p = origin + direction * distance_m;
-        let lidar = self.lidar_state(stamp_s + f64::from(point.time_s));
-        let velocity = lidar.to_lidar(&lidar.velocity_world_mps);
-        // A particle seen face on: ray and point looming are the same.
-        let looming = velocity.dot(&p) / p.norm_squared();
-        point.truth = PointTruth {
-            point_m: [p.x, p.y, p.z],
-            range_m: p.norm(),
-            point_looming_per_s: looming,
-            ray_looming_per_s: looming,
-            own_motion_looming_per_s: 0.0,
-            incidence_cos: 1.0,
-            object_id: 0,
-            surface: Surface::Speck,
-            moving: false,
-        };
-        point.point_m = [p.x as f32, p.y as f32, p.z as f32];
-        point.intensity = 5.0;
-    }
-}
-
-/// Range error of a weak return (`realism.range_bias`): 0 at intensity 210
-/// (the strongest synthetic return), 4 cm at intensity 0. Metres.
-pub fn intensity_range_error_m(intensity: f32) -> f64 {
-    0.04 * (1.0 - f64::from(intensity) / 210.0).clamp(0.0, 1.0)
-}
-
-/// Calibration seed of the simulated head: the lasers are a property of the
-/// sensor, the same whatever `--seed`.
-const CALIBRATION_SEED: u64 = 0x4844_4C36_3445;
-
-/// The lasers of `lidar`, lowest first: ideal (evenly spaced, on the axis, no
-/// corrections) unless `lidar.realism` asks otherwise.
-pub fn calibrate(lidar: &super::scene::LidarSpec) -> Vec<Laser> {
-    use rand::Rng;
-    let realism: &Realism = &lidar.realism;
-    let elevations = if realism.irregular_elevations {
-        two_block_elevations_rad(
-            lidar.beams,
-            lidar.elevation_min_deg,
-            lidar.elevation_max_deg,
-        )
-    } else {
-        beam_elevations_rad(
-            lidar.beams,
-            lidar.elevation_min_deg,
-            lidar.elevation_max_deg,
-        )
-    };
-    let beams = elevations.len();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(CALIBRATION_SEED);
-    elevations
-        .into_iter()
-        .enumerate()
-        .map(|(k, elevation_rad)| {
-            // Draw everything for every laser, so each option keeps its values
-            // whichever others are on.
-            let draws: [f64; 6] = std::array::from_fn(|_| rng.random::<f64>());
-            let upper = k >= beams / 2;
-            let side = if k % 2 == 0 { 1.0 } else { -1.0 };
-            Laser {
-                elevation_rad: if realism.irregular_elevations {
-                    elevation_rad + (0.06 * (2.0 * draws[0] - 1.0)).to_radians()
-                } else {
-                    elevation_rad
-                },
-                azimuth_offset_rad: if realism.azimuth_offsets {
-                    // HDL-64E: lasers alternate sides, 1 to 5 degrees off.
-                    (side * (1.0 + 4.0 * draws[1])).to_radians()
-                } else {
-                    0.0
-                },
-                vertical_offset_m: if realism.off_axis {
-                    let base = if upper { 0.20 } else { 0.14 };
-                    base + 0.01 * (2.0 * draws[2] - 1.0)
-                } else {
-                    0.0
-                },
-                horizontal_offset_m: if realism.off_axis {
-                    side * (0.026 + 0.004 * (2.0 * draws[3] - 1.0))
-                } else {
-                    0.0
-                },
-                range_bias_m: if realism.range_bias {
-                    0.02 * (2.0 * draws[4] - 1.0)
-                } else {
-                    0.0
-                },
-            }
-        })
-        .collect()
-}
-
-/// HDL-64E-like elevations, lowest first, radians: a lower block of half the
-/// lasers over the lower 16/26.8 of the field and an upper block over the top
-/// 10.5/26.8, 0.3/26.8 of the field apart (at the default field: -24.8 to
-/// -8.8 deg, 0.516 deg apart, and -8.5 to +2 deg, 0.339 deg apart).
-pub fn two_block_elevations_rad(beams: u16, min_deg: f64, max_deg: f64) -> Vec<f64> {
-    if beams < 4 {
-        return beam_elevations_rad(beams, min_deg, max_deg);
-    }
-    let span = max_deg - min_deg;
-    let lower_top = min_deg + span * 16.0 / 26.8;
-    let upper_bottom = lower_top + span * 0.3 / 26.8;
-    let lower = beams / 2;
-    let mut elevations = beam_elevations_rad(lower, min_deg, lower_top);
-    elevations.extend(beam_elevations_rad(beams - lower, upper_bottom, max_deg));
-    elevations
-}
-
-/// Beam elevations evenly spaced, lowest first, radians.
-pub fn beam_elevations_rad(beams: u16, min_deg: f64, max_deg: f64) -> Vec<f64> {
-    if beams <= 1 {
-        return vec![max_deg.to_radians()];
-    }
-    let step = (max_deg - min_deg) / f64::from(beams - 1);
-    (0..beams)
-        .map(|b| (min_deg + step * f64::from(b)).to_radians())
-        .collect()
 }
 
 fn intensity(hit: &Hit, direction_world: &Vector3<f64>) -> f32 {
     let facing = hit.normal.dot(direction_world).abs();
     let base = if hit.moving { 150.0 } else { 40.0 };
     (base + 60.0 * facing) as f32
-}
-
-/// The static world: road plane and every static object.
-fn static_objects(scenario: &Scenario) -> Vec<SceneObject> {
-    let ground = scenario.ground_height_m;
-    let mut objects = vec![SceneObject {
-        shape: Shape::Ground { height_m: ground },
-        object_id: 0,
-        moving: false,
-    }];
-    for object in &scenario.static_objects {
-        let shape = match object {
-            StaticObject::Box {
-                center_xy_m,
-                size_m,
-                yaw_deg,
-                ..
-            } => standing_box(*center_xy_m, *size_m, *yaw_deg, ground),
-            StaticObject::Car {
-                center_xy_m,
-                yaw_deg,
-                ..
-            } => standing_box(*center_xy_m, CAR_SIZE_M, *yaw_deg, ground),
-            StaticObject::Pole {
-                center_xy_m,
-                radius_m,
-                height_m,
-                ..
-            } => Shape::Cylinder {
-                base: Point3::new(center_xy_m[0], center_xy_m[1], ground),
-                radius_m: *radius_m,
-                height_m: *height_m,
-            },
-        };
-        objects.push(SceneObject {
-            shape,
-            object_id: 0,
-            moving: false,
-        });
-    }
-    objects
-}
-
-fn actor_object(actor: &Actor, t_s: f64, ground: f64) -> SceneObject {
-    let (position, _) = actor_motion(actor, t_s);
-    SceneObject {
-        shape: standing_box(position, actor.size_m, actor.yaw_deg, ground),
-        object_id: actor.id,
-        moving: true,
-    }
-}
-
-/// A box resting on the road.
-fn standing_box(center_xy_m: [f64; 2], size_m: [f64; 3], yaw_deg: f64, ground: f64) -> Shape {
-    Shape::Box {
-        center: Point3::new(center_xy_m[0], center_xy_m[1], ground + size_m[2] / 2.0),
-        half_extents_m: Vector3::new(size_m[0], size_m[1], size_m[2]) / 2.0,
-        yaw_rad: yaw_deg.to_radians(),
-    }
 }

@@ -1,0 +1,233 @@
+//! Turning the simulation into MCAP messages, in log-time order: the ROS 2
+//! CDR sensor messages (`/lidar/points` in `lidar_cloud.rs`, the motion
+//! messages in `motion.rs`), the truth point cloud (`truth_cloud.rs`) and the
+//! JSON truth records. [`SynthLog`] encodes, [`SequencedWriter`] writes; a
+//! cloud's slots are laid out by [`CloudShape`].
+
+mod lidar_cloud;
+mod motion;
+mod shape;
+mod truth_cloud;
+mod writer;
+
+use crate::output::{OutputError, OutputWriter, OwnChannelSpec};
+use crate::ros::schemas::{self as ros_schemas, RosDialect};
+
+use super::sensor::{SimScan, World};
+use super::truth::{TruthEvent, TruthScan};
+
+use lidar_cloud::lidar_cloud;
+use motion::{imu_message, tf_static, velocity_messages};
+pub use shape::{CloudShape, Slot};
+use truth_cloud::truth_cloud;
+pub use writer::SequencedWriter;
+
+/// Wall-clock time of the start of every synthetic drive (fixed, so the same
+/// arguments give the same bytes): 2023-11-14T22:13:20Z.
+pub const START_NS: i64 = 1_700_000_000_000_000_000;
+
+pub const LIDAR_FRAME: &str = "lidar";
+pub const VEHICLE_FRAME: &str = "imu_link";
+pub const ODOM_FRAME: &str = "odom";
+
+/// Topics of a synthetic log.
+pub mod topics {
+    pub const LIDAR: &str = "/lidar/points";
+    pub const IMU: &str = "/imu/data";
+    pub const TWIST: &str = "/vehicle/twist";
+    pub const ODOMETRY: &str = "/odom";
+    pub const TF_STATIC: &str = "/tf_static";
+    pub const TRUTH_POINTS: &str = crate::truth::POINTS_TOPIC;
+    pub const TRUTH_SCAN: &str = crate::truth::SCAN_TOPIC;
+    pub const TRUTH_EVENTS: &str = crate::truth::EVENTS_TOPIC;
+}
+
+/// Seconds from the start of the drive to a ROS stamp, ns.
+pub fn stamp_ns(t_s: f64) -> i64 {
+    START_NS + (t_s * 1e9).round() as i64
+}
+
+/// The ids of a synthetic log's channels, one per topic.
+struct Channels {
+    lidar: u16,
+    imu: u16,
+    twist: u16,
+    odometry: u16,
+    tf_static: u16,
+    truth_points: u16,
+    truth_scan: u16,
+    truth_events: u16,
+}
+
+impl Channels {
+    /// Register every channel of a synthetic log with `writer`.
+    fn register(writer: &mut OutputWriter) -> Result<Self, OutputError> {
+        let d = RosDialect::Ros2;
+        let mut add = |spec: OwnChannelSpec| writer.add_own_channel(&spec);
+        Ok(Self {
+            lidar: add(OwnChannelSpec::ros2(
+                topics::LIDAR,
+                "sensor_msgs",
+                "PointCloud2",
+                ros_schemas::point_cloud2(d),
+            ))?,
+            imu: add(OwnChannelSpec::ros2(
+                topics::IMU,
+                "sensor_msgs",
+                "Imu",
+                ros_schemas::imu(d),
+            ))?,
+            twist: add(OwnChannelSpec::ros2(
+                topics::TWIST,
+                "geometry_msgs",
+                "TwistStamped",
+                ros_schemas::twist_stamped(d),
+            ))?,
+            odometry: add(OwnChannelSpec::ros2(
+                topics::ODOMETRY,
+                "nav_msgs",
+                "Odometry",
+                ros_schemas::odometry(d),
+            ))?,
+            tf_static: add(OwnChannelSpec::ros2(
+                topics::TF_STATIC,
+                "tf2_msgs",
+                "TFMessage",
+                ros_schemas::tf_message(d),
+            ))?,
+            truth_points: add(OwnChannelSpec::ros2(
+                topics::TRUTH_POINTS,
+                "sensor_msgs",
+                "PointCloud2",
+                ros_schemas::point_cloud2(d),
+            ))?,
+            truth_scan: add(OwnChannelSpec::json(
+                topics::TRUTH_SCAN,
+                "looming.TruthScan",
+                include_str!("../../../schemas/looming.TruthScan.schema.json"),
+            ))?,
+            truth_events: add(OwnChannelSpec::json(
+                topics::TRUTH_EVENTS,
+                "looming.TruthEvent",
+                include_str!("../../../schemas/looming.TruthEvent.schema.json"),
+            ))?,
+        })
+    }
+}
+
+/// One encoded message for the writer.
+#[derive(Debug, Clone)]
+pub struct Encoded {
+    pub channel: u16,
+    pub log_time_ns: i64,
+    pub data: Vec<u8>,
+}
+
+/// Encodes a synthetic drive into messages, interval by interval. It does no
+/// I/O, so it can run on its own thread while [`SequencedWriter`] writes.
+pub struct SynthLog {
+    channels: Channels,
+    /// Motion messages are generated up to here (exclusive), seconds.
+    motion_until_s: f64,
+    imu_index: u64,
+    velocity_index: u64,
+    pending: Vec<Encoded>,
+}
+
+impl SynthLog {
+    /// Register the channels and queue `/tf_static`; messages start with scan `first_scan`.
+    pub fn new(
+        writer: &mut OutputWriter,
+        world: &World,
+        first_scan: u64,
+    ) -> Result<Self, OutputError> {
+        let channels = Channels::register(writer)?;
+        let start_s = first_scan as f64 * world.period_s;
+        let first_index = |rate_hz: f64| (start_s * rate_hz - 1e-9).ceil().max(0.0) as u64;
+        let mut log = Self {
+            channels,
+            motion_until_s: start_s,
+            imu_index: first_index(world.scenario.imu.rate_hz),
+            velocity_index: first_index(world.scenario.velocity_rate_hz),
+            pending: Vec::new(),
+        };
+        let tf = tf_static(world, start_s);
+        log.push(
+            log.channels.tf_static,
+            stamp_ns(start_s),
+            tf.encode_cdr(false),
+        );
+        Ok(log)
+    }
+
+    fn push(&mut self, channel: u16, log_time_ns: i64, data: Vec<u8>) {
+        self.pending.push(Encoded {
+            channel,
+            log_time_ns,
+            data,
+        });
+    }
+
+    /// Everything encoded since the last call, in log-time order.
+    pub fn take(&mut self) -> Vec<Encoded> {
+        std::mem::take(&mut self.pending)
+    }
+
+    /// Motion messages stamped before the end of `scan`'s sweep, then the scan
+    /// and its truth, published when the sweep ends.
+    pub fn encode_interval(&mut self, world: &World, scan: &SimScan, seed: u64) {
+        let sweep_end_s = scan.stamp_s + world.period_s;
+        self.encode_motion_until(world, sweep_end_s, seed);
+        let log_time_ns = stamp_ns(sweep_end_s);
+        let shape = CloudShape::new(world, scan);
+        self.push(
+            self.channels.lidar,
+            log_time_ns,
+            lidar_cloud(world, scan, &shape).encode_cdr(false),
+        );
+        self.push(
+            self.channels.truth_points,
+            log_time_ns,
+            truth_cloud(scan, &shape).encode_cdr(false),
+        );
+        let truth = serde_json::to_vec(&TruthScan::new(world, scan)).expect("truth serialises");
+        self.push(self.channels.truth_scan, log_time_ns, truth);
+    }
+
+    /// IMU, twist and odometry messages with stamps in [motion_until_s, until_s).
+    fn encode_motion_until(&mut self, world: &World, until_s: f64, seed: u64) {
+        let imu_period_s = 1.0 / world.scenario.imu.rate_hz;
+        let velocity_period_s = 1.0 / world.scenario.velocity_rate_hz;
+        loop {
+            let next_imu_s = self.imu_index as f64 * imu_period_s;
+            let next_velocity_s = self.velocity_index as f64 * velocity_period_s;
+            let next_s = next_imu_s.min(next_velocity_s);
+            if next_s >= until_s - 1e-12 {
+                break;
+            }
+            if next_imu_s <= next_velocity_s {
+                let imu = imu_message(world, next_imu_s, self.imu_index, seed);
+                self.push(
+                    self.channels.imu,
+                    stamp_ns(next_imu_s),
+                    imu.encode_cdr(false),
+                );
+                self.imu_index += 1;
+            } else {
+                let (twist, odometry) = velocity_messages(world, next_velocity_s);
+                let stamp = stamp_ns(next_velocity_s);
+                self.push(self.channels.twist, stamp, twist.encode_cdr(false));
+                self.push(self.channels.odometry, stamp, odometry.encode_cdr(false));
+                self.velocity_index += 1;
+            }
+        }
+        self.motion_until_s = until_s;
+    }
+
+    pub fn encode_events(&mut self, events: &[TruthEvent]) {
+        for event in events {
+            let data = serde_json::to_vec(event).expect("events serialise");
+            self.push(self.channels.truth_events, event.start_ns, data);
+        }
+    }
+}
