@@ -18,10 +18,15 @@
 //! and at most two scans are held; motion samples are pruned as pairs are
 //! emitted, so memory is bounded however long the log.
 
+mod buffer;
 pub mod frames;
 pub mod motion;
+mod stats;
 
-use std::collections::{BTreeMap, HashSet, VecDeque};
+use buffer::{InsertOutcome, SampleBuffer};
+pub use stats::PairingStats;
+
+use std::collections::{HashSet, VecDeque};
 use std::mem;
 use std::sync::Arc;
 
@@ -35,8 +40,8 @@ pub use frames::{
 use crate::engine::layout;
 use crate::model::motion::seconds_to_ns;
 use crate::model::{
-    Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan,
-    ScanLayout, ScanPair, StampNs, VelocitySample,
+    Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan, ScanPair,
+    StampNs, VelocitySample,
 };
 use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion};
 
@@ -104,44 +109,6 @@ pub enum PairEvent {
     Warning(String),
 }
 
-/// What the pairer did, for the run report.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
-pub struct PairingStats {
-    pub scans_seen: u64,
-    pub pairs_emitted: u64,
-    /// New scan's stamp not after the previous one's; the scan was dropped.
-    pub skipped_nonpositive_dt: u64,
-    /// dt above the maximum gap; no pair, the new scan became the previous.
-    pub skipped_gap: u64,
-    /// Pairs emitted with `motion.velocity == None`.
-    pub pairs_without_velocity: u64,
-    /// Pairs emitted without IMU angular velocity (twist used, or none).
-    pub pairs_without_imu: u64,
-    /// Scans with zero valid points (still paired).
-    pub empty_scans: u64,
-    /// Motion samples stamped before data already consumed; ignored.
-    pub late_samples: u64,
-    /// Pairs emitted before every source had reached the current scan's end.
-    pub pairs_motion_incomplete: u64,
-    /// Samples dropped by the `MAX_BUFFERED_SAMPLES_PER_SOURCE` backstop.
-    pub overflow_dropped_samples: u64,
-    /// Backwards stamp jumps taken as clock resets (the new scan restarted pairing).
-    pub clock_resets: u64,
-    /// "velocity" / "imu" -> where the last used extrinsic came from, e.g.
-    /// `tf_static (base_link from velodyne)`.
-    pub extrinsic_source: BTreeMap<String, String>,
-    /// Nominal scan period in use (set, or running median of accepted dts).
-    pub nominal_period_s: Option<f64>,
-    /// How the first scan's rings and times were obtained
-    /// (`engine::layout::complete`).
-    pub layout: Option<ScanLayout>,
-    /// Scans per layout kind, `"<rings kind> / <times kind>"` (e.g.
-    /// `laser_order / azimuth`): more than one entry when it varies.
-    pub layout_kinds: BTreeMap<String, u64>,
-    /// Scans whose ring field was dropped (values that are not ring numbers).
-    pub ring_fields_dropped: u64,
-}
-
 #[derive(Debug, Clone)]
 struct ScanEntry {
     scan: Arc<Scan>,
@@ -179,94 +146,6 @@ enum PairerState {
         previous: ScanEntry,
         current: ScanEntry,
     },
-}
-
-trait Stamped {
-    fn stamp_ns(&self) -> StampNs;
-}
-
-impl Stamped for TwistSample {
-    fn stamp_ns(&self) -> StampNs {
-        self.stamp_ns
-    }
-}
-
-impl Stamped for GyroSample {
-    fn stamp_ns(&self) -> StampNs {
-        self.stamp_ns
-    }
-}
-
-enum InsertOutcome {
-    Inserted,
-    Late,
-    InsertedWithOverflow,
-}
-
-/// Motion samples of one source, sorted by stamp, with a floor below which
-/// data has been consumed.
-#[derive(Debug)]
-struct SampleBuffer<T> {
-    samples: VecDeque<T>,
-    /// Samples stamped before this are late: the data there is already consumed.
-    floor_ns: StampNs,
-    newest_ns: Option<StampNs>,
-    /// Frame of the latest sample; a frame change mid-log applies from then on.
-    frame_id: Option<String>,
-}
-
-impl<T> Default for SampleBuffer<T> {
-    fn default() -> Self {
-        Self {
-            samples: VecDeque::new(),
-            floor_ns: StampNs::MIN,
-            newest_ns: None,
-            frame_id: None,
-        }
-    }
-}
-
-impl<T: Stamped + Copy> SampleBuffer<T> {
-    fn insert(&mut self, sample: T, frame_id: &str) -> InsertOutcome {
-        let stamp_ns = sample.stamp_ns();
-        if stamp_ns < self.floor_ns {
-            return InsertOutcome::Late;
-        }
-        // Usually appends; slightly out-of-order samples are placed by stamp.
-        let index = self.samples.partition_point(|s| s.stamp_ns() <= stamp_ns);
-        self.samples.insert(index, sample);
-        self.newest_ns = Some(self.newest_ns.map_or(stamp_ns, |n| n.max(stamp_ns)));
-        if self.frame_id.as_deref() != Some(frame_id) {
-            self.frame_id = Some(frame_id.to_owned());
-        }
-        if self.samples.len() > MAX_BUFFERED_SAMPLES_PER_SOURCE {
-            self.samples.pop_front();
-            return InsertOutcome::InsertedWithOverflow;
-        }
-        InsertOutcome::Inserted
-    }
-
-    /// Drops samples before `cut_ns`, keeping the last one before it so that
-    /// values just after the cut still interpolate.
-    fn prune_before(&mut self, cut_ns: StampNs) {
-        while self.samples.len() >= 2 && self.samples[1].stamp_ns() <= cut_ns {
-            self.samples.pop_front();
-        }
-        self.floor_ns = self.floor_ns.max(cut_ns);
-    }
-
-    /// Samples in `[from_ns, to_ns]` plus the nearest one on each side.
-    fn window(&self, from_ns: StampNs, to_ns: StampNs) -> Vec<T> {
-        let first = self.samples.partition_point(|s| s.stamp_ns() < from_ns);
-        let end = self.samples.partition_point(|s| s.stamp_ns() <= to_ns);
-        let first = first.saturating_sub(1);
-        let end = (end + 1).min(self.samples.len());
-        self.samples.range(first..end).copied().collect()
-    }
-
-    fn reaches(&self, stamp_ns: StampNs) -> bool {
-        self.newest_ns.is_some_and(|newest| newest >= stamp_ns)
-    }
 }
 
 /// The pairing state machine; see the module documentation.

@@ -1,0 +1,43 @@
+//! What the pairer did, for the run report.
+
+use std::collections::BTreeMap;
+
+use crate::model::ScanLayout;
+
+/// What the pairer did, for the run report.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct PairingStats {
+    pub scans_seen: u64,
+    pub pairs_emitted: u64,
+    /// New scan's stamp not after the previous one's; the scan was dropped.
+    pub skipped_nonpositive_dt: u64,
+    /// dt above the maximum gap; no pair, the new scan became the previous.
+    pub skipped_gap: u64,
+    /// Pairs emitted with `motion.velocity == None`.
+    pub pairs_without_velocity: u64,
+    /// Pairs emitted without IMU angular velocity (twist used, or none).
+    pub pairs_without_imu: u64,
+    /// Scans with zero valid points (still paired).
+    pub empty_scans: u64,
+    /// Motion samples stamped before data already consumed; ignored.
+    pub late_samples: u64,
+    /// Pairs emitted before every source had reached the current scan's end.
+    pub pairs_motion_incomplete: u64,
+    /// Samples dropped by the `MAX_BUFFERED_SAMPLES_PER_SOURCE` backstop.
+    pub overflow_dropped_samples: u64,
+    /// Backwards stamp jumps taken as clock resets (the new scan restarted pairing).
+    pub clock_resets: u64,
+    /// "velocity" / "imu" -> where the last used extrinsic came from, e.g.
+    /// `tf_static (base_link from velodyne)`.
+    pub extrinsic_source: BTreeMap<String, String>,
+    /// Nominal scan period in use (set, or running median of accepted dts).
+    pub nominal_period_s: Option<f64>,
+    /// How the first scan's rings and times were obtained
+    /// (`engine::layout::complete`).
+    pub layout: Option<ScanLayout>,
+    /// Scans per layout kind, `"<rings kind> / <times kind>"` (e.g.
+    /// `laser_order / azimuth`): more than one entry when it varies.
+    pub layout_kinds: BTreeMap<String, u64>,
+    /// Scans whose ring field was dropped (values that are not ring numbers).
+    pub ring_fields_dropped: u64,
+}
