@@ -10,7 +10,6 @@ pub mod budget;
 pub mod commands;
 pub mod decode;
 pub mod engine;
-pub mod eval;
 pub mod events;
 pub mod input;
 pub mod kitti;
@@ -19,7 +18,6 @@ pub mod output;
 pub mod pairing;
 pub mod pipeline;
 pub mod quality;
-pub mod quality_report;
 pub mod ros;
 pub mod synth;
 // MCAP logs built in memory, for tests, examples and benches only: behind

@@ -2,7 +2,7 @@
 //! processed log (`docs/quality.md`). A pure function of the engine's result
 //! and the current scan (no I/O), computed by the annotator for every pair and
 //! written into the pair's `/looming/pairs` message (`quality`);
-//! `looming quality` (`crate::quality_report`) sums them over a log.
+//! `looming quality` (`crate::commands::quality`) sums them over a log.
 //!
 //! The static ground is found without ego information, so it can judge the
 //! ego motion: cells whose fitted normal is within 15 degrees of the LiDAR's

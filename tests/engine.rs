@@ -3,8 +3,8 @@
 //! tolerance is the one the engine must meet; the measured values are in
 //! docs/method.md.
 
+use looming::commands::eval::{EvalReport, Summary, evaluate};
 use looming::engine::EngineConfig;
-use looming::eval::{EvalReport, Summary, evaluate};
 use looming::output::OutputOptions;
 use looming::synth::{SynthOptions, synthesize};
 

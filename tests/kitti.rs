@@ -376,7 +376,7 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
     ]);
     let eval: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&eval_json).unwrap()).unwrap();
-    let direct_eval = looming::eval::evaluate(&synth, &EngineConfig::default()).unwrap();
+    let direct_eval = looming::commands::eval::evaluate(&synth, &EngineConfig::default()).unwrap();
     assert_eq!(eval["pairs"].as_u64(), Some(direct_eval.pairs));
     let p90 = |q: &str, c: &str| eval["errors"][q][c]["p90_abs"].as_f64().unwrap();
     let direct_p90 = direct_eval.errors["fused"]["all_unmasked"].p90_abs;

@@ -1,8 +1,8 @@
 //! What the command line adds to a library error: the flag that gets past
 //! it. The library's errors say what is wrong and know nothing of flags.
 
+use looming::commands::eval::EvalError;
 use looming::commands::render::RenderError;
-use looming::eval::EvalError;
 use looming::kitti::ImportError;
 use looming::output::OutputError;
 use looming::pipeline::{ProcessError, ReplayError};

@@ -93,8 +93,12 @@ fn eval(args: EvalArgs) -> Result<(), Failure> {
         ..Default::default()
     };
     let scans = resolve::scan_options(&args.scans)?;
-    let report =
-        looming::eval::evaluate_against(&args.file, &config, args.truth.as_deref(), &scans)?;
+    let report = looming::commands::eval::evaluate_against(
+        &args.file,
+        &config,
+        args.truth.as_deref(),
+        &scans,
+    )?;
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
@@ -142,10 +146,10 @@ fn events(args: EventsArgs) -> Result<(), Failure> {
 }
 
 fn quality(args: QualityArgs) -> Result<(), Failure> {
-    let report = looming::quality_report::read_quality(&args.file).map_err(|error| {
+    let report = looming::commands::quality::read_quality(&args.file).map_err(|error| {
         let usage = matches!(
             error,
-            looming::quality_report::QualityError::NotProcessed { .. }
+            looming::commands::quality::QualityError::NotProcessed { .. }
         );
         Failure::with_code(error, if usage { 2 } else { 1 })
     })?;
