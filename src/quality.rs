@@ -20,16 +20,16 @@ use crate::engine::{PairLooming, ThreatLevel, mask};
 use crate::model::Scan;
 
 /// Largest angle between a ground cell's normal and the LiDAR's z axis.
-pub const GROUND_MAX_TILT_DEG: f64 = 15.0;
+pub(crate) const GROUND_MAX_TILT_DEG: f64 = 15.0;
 /// First pass: distance from the dominant ground height allowed at the
 /// sensor, metres, ...
-pub const GROUND_HEIGHT_TOLERANCE_M: f64 = 0.3;
+pub(crate) const GROUND_HEIGHT_TOLERANCE_M: f64 = 0.3;
 /// ... growing by this much per metre of horizontal distance (a 3 degree
 /// tilt or slope).
-pub const GROUND_HEIGHT_TOLERANCE_PER_M: f64 = 0.05;
+pub(crate) const GROUND_HEIGHT_TOLERANCE_PER_M: f64 = 0.05;
 /// Second pass: distance from the plane fitted through the first pass.
-pub const GROUND_PLANE_TOLERANCE_M: f64 = 0.15;
-pub const GROUND_PLANE_TOLERANCE_PER_M: f64 = 0.02;
+pub(crate) const GROUND_PLANE_TOLERANCE_M: f64 = 0.15;
+pub(crate) const GROUND_PLANE_TOLERANCE_PER_M: f64 = 0.02;
 /// Fewest first-pass cells to fit a plane through.
 const MIN_PLANE_CELLS: usize = 30;
 

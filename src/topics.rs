@@ -51,7 +51,7 @@ impl Role {
 }
 
 /// `/tf_static` (any namespace) carries static transforms.
-pub fn is_static_tf_topic(topic: &str) -> bool {
+pub(crate) fn is_static_tf_topic(topic: &str) -> bool {
     topic.trim_end_matches('/').ends_with("tf_static")
 }
 

@@ -9,11 +9,11 @@ pub type Rgba = [u8; 4];
 
 /// Looming of full intensity, 1/s: a time to contact of 1 s (the high threat
 /// level's default).
-pub const SATURATION_PER_S: f32 = 1.0;
+pub(crate) const SATURATION_PER_S: f32 = 1.0;
 
 /// Zero looming: dark grey, so the static world stays visible on the dark
 /// backgrounds of Foxglove and Rerun.
-pub const ZERO: Rgba = [60, 60, 60, 255];
+pub(crate) const ZERO: Rgba = [60, 60, 60, 255];
 /// A value that is not trusted (masked, ambiguous, no previous scan).
 pub const MASKED: Rgba = [150, 150, 150, 128];
 /// A cell without a return (images only).
@@ -21,9 +21,9 @@ pub const EMPTY: Rgba = [0, 0, 0, 255];
 
 /// Intensity steps of the scale: the eye tells no more apart, and a few
 /// distinct colours compress several times better than 256.
-pub const STEPS: u8 = 16;
+pub(crate) const STEPS: u8 = 16;
 /// [`STEPS`] as a float, for the scale's arithmetic.
-pub const LEVELS: f32 = STEPS as f32;
+pub(crate) const LEVELS: f32 = STEPS as f32;
 
 /// The looming scale: the square root of `|L| / 1 1/s` (clamped to 1, in
 /// [`LEVELS`] steps) blends [`ZERO`] into red (L > 0) or blue (L < 0); the
@@ -70,22 +70,22 @@ fn step_colour(step: Step) -> Rgba {
 }
 
 /// Palette index of [`EMPTY`] in range images.
-pub const EMPTY_INDEX: u8 = 0;
+pub(crate) const EMPTY_INDEX: u8 = 0;
 /// Palette index of [`MASKED`] in range images.
-pub const MASKED_INDEX: u8 = 1;
+pub(crate) const MASKED_INDEX: u8 = 1;
 /// Palette index of [`ZERO`]; then each step, approaching and receding in
 /// turn: `ZERO_INDEX + 2 level - 1` and `ZERO_INDEX + 2 level`.
 const ZERO_INDEX: u8 = 2;
 /// Colours a range image can hold: empty, masked, zero and the scale's
 /// steps each way.
-pub const PALETTE_LEN: usize = 3 + 2 * STEPS as usize;
+pub(crate) const PALETTE_LEN: usize = 3 + 2 * STEPS as usize;
 
 /// The palette index of a value in range images (see [`image_palette`]):
 /// one byte per cell instead of three, which is what makes their PNGs small.
 /// Weak values of either sign get neighbouring indexes, so the noise of the
 /// static world (small values of both signs side by side) differs little
 /// from cell to cell: a fifth fewer bytes than with the signs apart.
-pub fn looming_index(looming_per_s: f32) -> u8 {
+pub(crate) fn looming_index(looming_per_s: f32) -> u8 {
     match looming_step(looming_per_s) {
         None => MASKED_INDEX,
         Some(Step { level: 0, .. }) => ZERO_INDEX,
@@ -132,7 +132,7 @@ pub fn threat(level: ThreatLevel) -> Rgba {
 }
 
 /// Translucent colour of a threat sphere, components 0-1.
-pub fn threat_zone(level: ThreatLevel) -> [f64; 4] {
+pub(crate) fn threat_zone(level: ThreatLevel) -> [f64; 4] {
     let [r, g, b, _] = threat(level);
     let alpha = match level {
         ThreatLevel::High => 0.30,

@@ -156,7 +156,7 @@ pub const POSITION_QUANTUM_M: f32 = 1.0 / 1024.0;
 /// Looming values in point fields are rounded to 1/1024 1/s, far below their
 /// noise (about 0.01 1/s): the zeroed low mantissa bits let zstd shrink the
 /// field to a fraction.
-pub const LOOMING_QUANTUM_PER_S: f32 = 1.0 / 1024.0;
+pub(crate) const LOOMING_QUANTUM_PER_S: f32 = 1.0 / 1024.0;
 
 fn quantized(looming_per_s: f32) -> f32 {
     (looming_per_s / LOOMING_QUANTUM_PER_S).round() * LOOMING_QUANTUM_PER_S
@@ -164,7 +164,7 @@ fn quantized(looming_per_s: f32) -> f32 {
 
 /// `/looming/points`: every point of the scan with its fused looming (NaN
 /// where untrusted) and colour.
-pub fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> PointCloud {
+pub(crate) fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> PointCloud {
     let mut layout = Layout::xyz().add("looming", NumericType::Float32).rgba();
     if fields == FieldSet::Full {
         layout = layout
@@ -197,7 +197,7 @@ pub fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> Po
 }
 
 /// `/looming/disagreement`: the points of moving patches, with `D` and its colour.
-pub fn disagreement_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
+pub(crate) fn disagreement_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
     let layout = Layout::xyz()
         .add("disagreement", NumericType::Float32)
         .rgba();
@@ -216,7 +216,7 @@ pub fn disagreement_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
 
 /// `/looming/threat`: the points at low, medium or high threat, with their
 /// level, fused looming and the level's colour.
-pub fn threat_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
+pub(crate) fn threat_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
     let layout = Layout::xyz()
         .add("looming", NumericType::Float32)
         .add("level", NumericType::Uint8)
@@ -330,7 +330,8 @@ pub fn indexed_png_with(
 }
 
 /// Entity ids of the three spheres.
-pub const ZONE_IDS: [&str; 3] = ["threat_zone_low", "threat_zone_medium", "threat_zone_high"];
+pub(crate) const ZONE_IDS: [&str; 3] =
+    ["threat_zone_low", "threat_zone_medium", "threat_zone_high"];
 
 /// `/looming/threat_zones`: the equal-looming spheres of the three levels, or,
 /// without a velocity, the deletion of the previous ones.
@@ -403,7 +404,7 @@ fn key_value(key: &str, value: &str) -> KeyValuePair {
 }
 
 /// `/looming/log`: one warning line announcing a near-miss event.
-pub fn event_log(event: &NearMissEvent) -> Log {
+pub(crate) fn event_log(event: &NearMissEvent) -> Log {
     Log {
         timestamp: Some(timestamp(event.start_ns)),
         level: log::Level::Warning as i32,

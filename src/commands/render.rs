@@ -254,7 +254,7 @@ impl Wanted {
 /// The image of one pair (pure): the range image or the top view of
 /// `channel`. Sizes from `options` (`row_height_px`, `top_extent_m`,
 /// `top_size_px`; the paths, `at` and `force` are not used).
-pub fn render_image(
+pub(crate) fn render_image(
     pair: &ScanPair,
     looming: &PairLooming,
     channel: RenderChannel,

@@ -189,7 +189,7 @@ pub fn imu_sample_from_imu(msg: &Imu) -> ImuSample {
 }
 
 /// `geometry_msgs/TwistStamped` to [`VelocitySample`] in the header frame.
-pub fn velocity_from_twist_stamped(msg: &TwistStamped) -> VelocitySample {
+pub(crate) fn velocity_from_twist_stamped(msg: &TwistStamped) -> VelocitySample {
     VelocitySample {
         stamp_ns: msg.header.stamp.to_ns(),
         frame_id: normalize_frame_id(&msg.header.frame_id),
@@ -218,7 +218,9 @@ pub fn velocity_from_odometry(msg: &Odometry) -> VelocitySample {
 
 /// `tf2_msgs/TFMessage` to [`FrameTransform`]s. A transform with a zero or
 /// non-finite rotation fails the whole message, as tf2 itself refuses it.
-pub fn transforms_from_tf_message(msg: &TFMessage) -> Result<Vec<FrameTransform>, DecodeError> {
+pub(crate) fn transforms_from_tf_message(
+    msg: &TFMessage,
+) -> Result<Vec<FrameTransform>, DecodeError> {
     msg.transforms
         .iter()
         .map(|t| {

@@ -45,7 +45,7 @@ const RIDGE: f64 = 0.05;
 /// (metres) and nothing changes: the estimate reads 0.001-0.0045 m on the
 /// synthetic sensor, which has no offsets, and 0.018-0.021 m on the real
 /// HDL-64E and Pandar64.
-pub const MIN_RMS_M: f64 = 0.009;
+pub(crate) const MIN_RMS_M: f64 = 0.009;
 /// Scans after which the running estimate becomes a moving average (a
 /// sensor's offsets do not change within a log; the average makes the two
 /// scans of a pair carry nearly the same correction).
@@ -58,7 +58,7 @@ const REESTIMATE_EVERY: u64 = 10;
 
 /// The sensor's per-laser offsets, averaged over the scans seen so far.
 #[derive(Debug, Clone, Default)]
-pub struct RangeBias {
+pub(crate) struct RangeBias {
     per_row_m: Vec<f64>,
     /// Estimates folded in.
     scans: f64,

@@ -297,7 +297,7 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
 ///
 /// `previous_cols`: the columns the previous pair's images had; kept where
 /// this scan's count is within [`KEPT_COLUMNS_TOLERANCE`] of it.
-pub fn geometry_for(
+pub(crate) fn geometry_for(
     previous: &Scan,
     current: &Scan,
     columns: Option<usize>,

@@ -12,7 +12,7 @@ const STEP_NS: i64 = 1_000_000;
 
 /// Which motion to integrate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MotionModel {
+pub(crate) enum MotionModel {
     /// Rotation only (gyro): de-rotates a scan without moving it.
     RotationOnly,
     /// Rotation and translation: the full ego motion.
@@ -21,7 +21,7 @@ pub enum MotionModel {
 
 /// Poses `reference_from_lidar(t)` on a fine time grid.
 #[derive(Debug, Clone)]
-pub struct Trajectory {
+pub(crate) struct Trajectory {
     start_ns: StampNs,
     poses: Vec<Isometry3<f64>>,
 }
@@ -83,8 +83,10 @@ impl Trajectory {
         )
     }
 
-    /// The transform taking points measured at `from_ns` into the LiDAR frame at `to_ns`.
-    pub fn relative(&self, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
+    /// The transform taking points measured at `from_ns` into the LiDAR frame
+    /// at `to_ns` (the renders' transform cache is checked against it).
+    #[cfg(test)]
+    pub(crate) fn relative(&self, from_ns: StampNs, to_ns: StampNs) -> Isometry3<f64> {
         self.pose(to_ns).inverse() * self.pose(from_ns)
     }
 }

@@ -167,7 +167,7 @@ const MIN_TRUSTED_CELLS: usize = 3;
 
 /// Cells down to this fraction of the threshold join a cluster, whose median
 /// then decides.
-pub const CANDIDATE_FRACTION: f64 = 0.8;
+pub(crate) const CANDIDATE_FRACTION: f64 = 0.8;
 
 /// The flaw that leaves a cell's measured `L_lidar` usable: a neighbour on
 /// another surface. (Without an ego prediction the surface is newly in view,

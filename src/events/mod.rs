@@ -61,8 +61,8 @@ impl Default for EventConfig {
 
 /// Side of the square face whose image, at [`REFERENCE_RANGE_M`], sets the
 /// default smallest cluster.
-pub const REFERENCE_FACE_M: f64 = 0.3;
-pub const REFERENCE_RANGE_M: f64 = 10.0;
+pub(crate) const REFERENCE_FACE_M: f64 = 0.3;
+pub(crate) const REFERENCE_RANGE_M: f64 = 10.0;
 
 /// The cells a 0.3 m square face covers at 10 m (at least 3): about 40 on a
 /// 64 x 2048 image, 5 on 32 x 512. Scales with the sensor's resolution so a

@@ -20,7 +20,7 @@ const MAX_ORTHONORMAL_ERROR: f64 = 1e-3;
 /// Only the `R:` (9 numbers, row-major) and `T:` (3 numbers, metres) lines
 /// matter; other lines (`calib_time: ...`) are ignored. Errors carry the
 /// 1-based line, or 0 when a key is missing altogether.
-pub fn parse_imu_to_velo(text: &str) -> Result<Isometry3<f64>, (usize, String)> {
+pub(crate) fn parse_imu_to_velo(text: &str) -> Result<Isometry3<f64>, (usize, String)> {
     let mut rotation_rows: Option<(usize, [f64; 9])> = None;
     let mut translation_m: Option<(usize, [f64; 3])> = None;
     for (index, line) in text.lines().enumerate() {
@@ -47,7 +47,7 @@ pub fn parse_imu_to_velo(text: &str) -> Result<Isometry3<f64>, (usize, String)> 
 }
 
 /// The calibration of a drive's date folder (`2011_09_26/calib_imu_to_velo.txt`).
-pub fn read_imu_to_velo(path: &Path) -> Result<Isometry3<f64>, KittiError> {
+pub(crate) fn read_imu_to_velo(path: &Path) -> Result<Isometry3<f64>, KittiError> {
     let text = read_text(path, MAX_CALIB_BYTES, "IMU-to-Velodyne calibration")?;
     parse_imu_to_velo(&text).map_err(|(line, reason)| match line {
         0 => KittiError::Invalid {

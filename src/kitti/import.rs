@@ -28,7 +28,7 @@ use super::velodyne::{derive_rings, read_bin, sweep_fraction};
 pub const LIDAR_TOPIC: &str = "/velodyne_points";
 pub const IMU_TOPIC: &str = "/oxts/imu";
 pub const TWIST_TOPIC: &str = "/oxts/twist";
-pub const TF_STATIC_TOPIC: &str = "/tf_static";
+pub(crate) const TF_STATIC_TOPIC: &str = "/tf_static";
 pub const LIDAR_FRAME: &str = "velo_link";
 pub const IMU_FRAME: &str = "imu_link";
 
@@ -393,7 +393,7 @@ fn write_oxts(
 /// The packet as `sensor_msgs/Imu` (orientation from roll, pitch, yaw; rates
 /// wf, wl, wu; accelerations af, al, au) and `geometry_msgs/TwistStamped`
 /// (vf, vl, vu; wf, wl, wu), both in `imu_link` (x forward, y left, z up).
-pub fn oxts_messages(stamp_ns: i64, packet: &OxtsPacket) -> (Imu, TwistStamped) {
+pub(crate) fn oxts_messages(stamp_ns: i64, packet: &OxtsPacket) -> (Imu, TwistStamped) {
     let unknown = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let imu = Imu {
         header: Header::new(stamp_ns, IMU_FRAME),

@@ -55,7 +55,7 @@ const FIRST_INTEGER_FIELD: usize = 25;
 /// local east-north-up frame, yaw 0 = east, counter-clockwise positive.
 /// `f/l/u` components are in the vehicle frame (forward, left, up).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OxtsPacket {
+pub(crate) struct OxtsPacket {
     pub lat_deg: f64,
     pub lon_deg: f64,
     pub alt_m: f64,
@@ -116,7 +116,7 @@ impl OxtsPacket {
 
 /// One packet from its line: exactly 30 finite numbers separated by
 /// whitespace, the last five integral (written `4` or `4.0`).
-pub fn parse_oxts_line(line: &str) -> Result<OxtsPacket, String> {
+pub(crate) fn parse_oxts_line(line: &str) -> Result<OxtsPacket, String> {
     let found = line.split_ascii_whitespace().count();
     if found != FIELD_COUNT {
         return Err(format!("expected {FIELD_COUNT} numbers, found {found}"));
@@ -168,7 +168,7 @@ pub fn parse_oxts_line(line: &str) -> Result<OxtsPacket, String> {
 
 /// The packet of an `oxts/data/*.txt` file: its first non-empty line (later
 /// lines are ignored, as pykitti does).
-pub fn read_oxts_file(path: &Path) -> Result<OxtsPacket, KittiError> {
+pub(crate) fn read_oxts_file(path: &Path) -> Result<OxtsPacket, KittiError> {
     let text = read_text(path, MAX_OXTS_BYTES, "OXTS packet file")?;
     let Some((index, line)) = text.lines().enumerate().find(|(_, l)| !l.trim().is_empty()) else {
         return Err(KittiError::Invalid {

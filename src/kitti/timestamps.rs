@@ -21,7 +21,7 @@ const MAX_FRACTION_DIGITS: usize = 9;
 /// `2011-09-26 13:02:25.964389445` (UTC). The fraction may have 0 to 9
 /// digits (`13:02:25` and `13:02:25.96` are accepted); surrounding whitespace
 /// is ignored. Integer arithmetic only: floats would lose the nanoseconds.
-pub fn parse_timestamp(text: &str) -> Result<i64, String> {
+pub(crate) fn parse_timestamp(text: &str) -> Result<i64, String> {
     let text = text.trim();
     let (date, time) = text
         .split_once(' ')
@@ -40,7 +40,7 @@ pub fn parse_timestamp(text: &str) -> Result<i64, String> {
 /// timestamps is an error, as silently skipping it would shift every later
 /// frame's time. An empty file gives an empty list (the caller compares the
 /// count with the number of frames).
-pub fn read_timestamps(path: &Path) -> Result<Vec<i64>, KittiError> {
+pub(crate) fn read_timestamps(path: &Path) -> Result<Vec<i64>, KittiError> {
     let text = read_text(path, MAX_TIMESTAMPS_BYTES, "timestamps file")?;
     let mut stamps_ns = Vec::new();
     let mut first_blank_line = None;

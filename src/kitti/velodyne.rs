@@ -26,7 +26,7 @@ const MAX_RINGS: usize = 128;
 /// length before anything is read or allocated). Non-finite values are kept
 /// as they are: the importer or decoder skips them, and dropping them here
 /// would break the laser-by-laser order `derive_rings` relies on.
-pub fn read_bin(path: &Path, max_points: usize) -> Result<Vec<[f32; 4]>, KittiError> {
+pub(crate) fn read_bin(path: &Path, max_points: usize) -> Result<Vec<[f32; 4]>, KittiError> {
     let (file, len_bytes) = open_sized(path, "Velodyne scan")?;
     let invalid = |reason| KittiError::Invalid {
         path: path.to_path_buf(),
@@ -55,7 +55,7 @@ pub fn read_bin(path: &Path, max_points: usize) -> Result<Vec<[f32; 4]>, KittiEr
 /// Measured on real scans: timing points this way removes the motion seam
 /// behind the car; the clockwise reading doubles it. NaN for non-finite
 /// input; (0, 0) counts as forward.
-pub fn sweep_fraction(x: f32, y: f32) -> f64 {
+pub(crate) fn sweep_fraction(x: f32, y: f32) -> f64 {
     let azimuth_rad = f64::from(y).atan2(f64::from(x));
     ((azimuth_rad + PI) / TAU).rem_euclid(1.0)
 }
@@ -68,7 +68,7 @@ pub fn sweep_fraction(x: f32, y: f32) -> f64 {
 /// plausibly a spinning LiDAR: fewer than 2 or more than 128 rings, a ring
 /// that does not turn, or a ring holding fewer than 1/20 of the mean valid
 /// points per ring.
-pub fn derive_rings(points: &[[f32; 4]]) -> Option<Vec<u16>> {
+pub(crate) fn derive_rings(points: &[[f32; 4]]) -> Option<Vec<u16>> {
     let xyz: Vec<[f32; 3]> = points.iter().map(|p| [p[0], p[1], p[2]]).collect();
     crate::engine::layout::laser_order(&xyz, 2..=MAX_RINGS).map(|order| order.rings)
 }

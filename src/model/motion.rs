@@ -8,7 +8,7 @@ use super::scan::StampNs;
 /// Between two samples further apart than this (or than twice the hold, if
 /// larger) the series does not interpolate: a source dropout is not bridged by
 /// a straight line, only held from each side for the hold tolerance.
-pub const MIN_INTERPOLATION_GAP_S: f64 = 1.0;
+pub(crate) const MIN_INTERPOLATION_GAP_S: f64 = 1.0;
 
 /// A vector-valued time series, sorted by stamp, with linear interpolation
 /// between samples and a bounded hold beyond them.

@@ -60,7 +60,7 @@ const PRE_SCAN_HISTORY_S: f64 = 1.0;
 /// Backstop against unbounded growth when no pair can be emitted for a long
 /// time (e.g. the LiDAR stops while a 1 kHz IMU keeps publishing). The oldest
 /// samples are dropped beyond this and counted.
-pub const MAX_BUFFERED_SAMPLES_PER_SOURCE: usize = 50_000;
+pub(crate) const MAX_BUFFERED_SAMPLES_PER_SOURCE: usize = 50_000;
 /// Without a known maximum gap, a backwards stamp jump larger than this is
 /// taken as a clock reset rather than jitter.
 const CLOCK_RESET_FALLBACK_S: f64 = 1.0;

@@ -9,7 +9,7 @@ use crate::model::{AngularSource, ExtrinsicInfo, PairMotion, StampNs, TimeSeries
 /// Angular velocity of the LiDAR in its own frame: `w_L = R^T w_M`, with
 /// `R` the rotation of `motion_from_lidar`. Angular velocity is the same
 /// for every point of a rigid body, so no lever-arm term appears.
-pub fn angular_velocity_in_lidar(
+pub(crate) fn angular_velocity_in_lidar(
     motion_from_lidar: &Isometry3<f64>,
     angular_motion_radps: &Vector3<f64>,
 ) -> Vector3<f64> {
@@ -20,7 +20,7 @@ pub fn angular_velocity_in_lidar(
 /// the motion frame's origin: `v_L = R^T (v_M + w_M x l) = R^T v_M + w_L x (R^T l)`,
 /// with `l` the LiDAR origin in the motion frame. Taking `w_L` as a parameter
 /// lets the caller use its best angular velocity (the gyro) for the lever arm.
-pub fn lidar_velocity_from_twist(
+pub(crate) fn lidar_velocity_from_twist(
     motion_from_lidar: &Isometry3<f64>,
     linear_motion_mps: &Vector3<f64>,
     angular_lidar_radps: &Vector3<f64>,
@@ -32,7 +32,7 @@ pub fn lidar_velocity_from_twist(
 
 /// A velocity (twist) sample as the pairer buffers it, in its own frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TwistSample {
+pub(crate) struct TwistSample {
     pub stamp_ns: StampNs,
     pub linear_mps: Vector3<f64>,
     pub angular_radps: Vector3<f64>,
@@ -40,14 +40,14 @@ pub struct TwistSample {
 
 /// A gyro sample as the pairer buffers it, in the IMU frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GyroSample {
+pub(crate) struct GyroSample {
     pub stamp_ns: StampNs,
     pub angular_velocity_radps: Vector3<f64>,
 }
 
 /// Everything [`build_pair_motion`] needs; samples are those near the pair.
 #[derive(Debug, Clone)]
-pub struct MotionInputs<'a> {
+pub(crate) struct MotionInputs<'a> {
     /// `(samples, LiDAR pose in their frame)`; `None` when there is no velocity source.
     pub twists: Option<(&'a [TwistSample], ExtrinsicInfo)>,
     /// `(samples, LiDAR pose in their frame)`; `None` when there is no IMU source.
@@ -59,7 +59,7 @@ pub struct MotionInputs<'a> {
 /// Expresses the samples of a pair in the LiDAR frame. The angular velocity
 /// comes from the gyro when there are IMU samples, else from the twist; the
 /// lever-arm term of the velocity uses that same best angular velocity.
-pub fn build_pair_motion(inputs: MotionInputs<'_>) -> PairMotion {
+pub(crate) fn build_pair_motion(inputs: MotionInputs<'_>) -> PairMotion {
     let gyro = inputs.gyro.filter(|(samples, _)| !samples.is_empty());
     let twists = inputs.twists.filter(|(samples, _)| !samples.is_empty());
 

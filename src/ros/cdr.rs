@@ -320,7 +320,7 @@ impl<'a> WireRead<'a> for Ros1Reader<'a> {
 
 /// Writer for ROS 2 plain CDR (XCDR1), either endianness.
 #[derive(Debug, Clone)]
-pub struct CdrWriter {
+pub(crate) struct CdrWriter {
     buf: Vec<u8>,
     big_endian: bool,
 }
@@ -384,7 +384,7 @@ impl WireWrite for CdrWriter {
 
 /// Writer for ROS 1 serialization.
 #[derive(Debug, Clone, Default)]
-pub struct Ros1Writer {
+pub(crate) struct Ros1Writer {
     buf: Vec<u8>,
 }
 

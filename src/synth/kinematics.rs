@@ -6,7 +6,7 @@ use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vecto
 use super::scene::{Actor, EgoSpec, Profile, profile_at, profile_slope_at};
 
 /// Standard gravity, m/s^2 (what an IMU at rest on a level road reads on z).
-pub const GRAVITY_MPS2: f64 = 9.80665;
+pub(crate) const GRAVITY_MPS2: f64 = 9.80665;
 
 /// Step of the tabulated ego track, seconds.
 const TRACK_STEP_S: f64 = 1e-3;
@@ -164,7 +164,7 @@ fn hermite(a: f64, b: f64, da: f64, db: f64, u: f64) -> f64 {
 }
 
 /// The LiDAR mount: its pose in the vehicle frame.
-pub fn vehicle_from_lidar(mount_xyz_m: [f64; 3], mount_rpy_deg: [f64; 3]) -> Isometry3<f64> {
+pub(crate) fn vehicle_from_lidar(mount_xyz_m: [f64; 3], mount_rpy_deg: [f64; 3]) -> Isometry3<f64> {
     let [roll, pitch, yaw] = mount_rpy_deg.map(f64::to_radians);
     let rotation = Rotation3::from_euler_angles(roll, pitch, yaw);
     Isometry3::from_parts(
@@ -205,7 +205,7 @@ impl LidarState {
 }
 
 /// Position (x, y) and velocity (vx, vy) of an actor at `t_s`.
-pub fn actor_motion(actor: &Actor, t_s: f64) -> ([f64; 2], [f64; 2]) {
+pub(crate) fn actor_motion(actor: &Actor, t_s: f64) -> ([f64; 2], [f64; 2]) {
     if let Some(points) = &actor.trajectory {
         return trajectory_motion(points, t_s);
     }

@@ -67,13 +67,8 @@ pub enum SynthError {
     Internal(String),
 }
 
-/// The scenario with the command-line overrides applied, validated.
-pub fn resolve_scenario(options: &SynthOptions) -> Result<Scenario, SynthError> {
-    resolve_scenario_with(options, &LidarOverrides::default())
-}
-
-/// [`resolve_scenario`] with the LiDAR overrides too.
-pub fn resolve_scenario_with(
+/// The scenario with the command-line and LiDAR overrides applied, validated.
+pub(crate) fn resolve_scenario_with(
     options: &SynthOptions,
     lidar: &LidarOverrides,
 ) -> Result<Scenario, SynthError> {

@@ -84,7 +84,7 @@ impl TruthScan {
 }
 
 /// Points count towards an event only when they face the sensor this much.
-pub const FACING_COS: f64 = 0.5;
+pub(crate) const FACING_COS: f64 = 0.5;
 
 /// `/truth/events`: one planted near miss.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,7 +109,7 @@ pub struct TruthEvent {
 /// that face the sensor (incidence within 60 degrees: grazing points have
 /// unbounded ray looming and no detector trusts them) have a true ray looming
 /// of at least `1 / ttc_threshold_s`.
-pub struct EventTracker {
+pub(crate) struct EventTracker {
     threshold_per_s: f64,
     ttc_threshold_s: f64,
     min_points: usize,

@@ -17,7 +17,7 @@ use super::{EvalError, ScanTruth, position_key};
 const READ_AHEAD: usize = 4;
 
 /// Hands out the other log's truth by scan stamp, in increasing order.
-pub struct TruthCursor {
+pub(crate) struct TruthCursor {
     rx: Receiver<(StampNs, ScanTruth)>,
     ahead: Option<(StampNs, ScanTruth)>,
 }
@@ -43,7 +43,7 @@ impl TruthCursor {
 }
 
 /// Run `evaluate` with a cursor over the truth of `truth_path`.
-pub fn with_truth_of<T>(
+pub(crate) fn with_truth_of<T>(
     truth_path: &Path,
     evaluate: impl FnOnce(&mut TruthCursor) -> Result<T, EvalError>,
 ) -> Result<T, EvalError> {

@@ -16,7 +16,7 @@ use crate::truth::{self, PointTruth};
 
 /// |own-motion looming| above which a truth cell counts as "moving
 /// observably": motion that changes the range along the ray.
-pub const OBSERVABLE_MOTION_PER_S: f64 = 0.1;
+pub(crate) const OBSERVABLE_MOTION_PER_S: f64 = 0.1;
 
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
@@ -44,7 +44,7 @@ pub enum EvalError {
 /// from another log (`--truth`), the index of each point by its exact
 /// position (a KITTI import reorders the points but keeps their float bits).
 #[derive(Debug, Default)]
-pub struct ScanTruth {
+pub(crate) struct ScanTruth {
     pub points: Vec<PointTruth>,
     pub index_by_position: Option<HashMap<[u32; 3], u32>>,
 }
@@ -60,14 +60,14 @@ impl ScanTruth {
 }
 
 /// The exact bits of a position.
-pub fn position_key(p: &[f32; 3]) -> [u32; 3] {
+pub(crate) fn position_key(p: &[f32; 3]) -> [u32; 3] {
     [p[0].to_bits(), p[1].to_bits(), p[2].to_bits()]
 }
 
 /// Error statistics from a histogram of |error| (log-spaced bins: bounded memory
 /// however long the log) plus running sums.
 #[derive(Debug, Clone)]
-pub struct ErrorStats {
+pub(crate) struct ErrorStats {
     bins: Vec<u64>,
     count: u64,
     sum: f64,
@@ -156,7 +156,7 @@ pub struct Summary {
 }
 
 /// Classes of cells (by the truth of the cell's return and the engine's mask).
-pub const CLASSES: [&str; 6] = [
+pub(crate) const CLASSES: [&str; 6] = [
     "static_road",
     "static_facing",
     "static_oblique",

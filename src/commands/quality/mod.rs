@@ -29,14 +29,14 @@ pub use self::report::{
 };
 
 /// A ground half reads "approaching" or "receding" beyond this, 1/s.
-pub const GROUND_SIDE_THRESHOLD_PER_S: f64 = 0.02;
+pub(crate) const GROUND_SIDE_THRESHOLD_PER_S: f64 = 0.02;
 /// Fewest trusted static ground cells a half needs to be judged in a pair.
-pub const MIN_SIDE_CELLS: u64 = 10;
+pub(crate) const MIN_SIDE_CELLS: u64 = 10;
 /// A ground pattern is consistent when it holds in at least this share of the
 /// pairs where both halves can be judged (and in at least two pairs).
-pub const CONSISTENT_SHARE: f64 = 0.5;
+pub(crate) const CONSISTENT_SHARE: f64 = 0.5;
 /// Above this share of the trusted ground flagged moving, the ego motion is wrong.
-pub const GROUND_MOVING_LIMIT: f64 = 0.05;
+pub(crate) const GROUND_MOVING_LIMIT: f64 = 0.05;
 /// Below this trusted fraction the log is not to be trusted.
 pub const MIN_TRUSTED_FRACTION: f64 = 0.5;
 

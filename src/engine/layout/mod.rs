@@ -37,7 +37,7 @@ use organized::{check_ring_field, organized_rows, rows_agree};
 /// Scan period assumed when the stamps give none, seconds.
 pub const DEFAULT_PERIOD_S: f64 = 0.1;
 /// Largest ring number accepted from a field (see the decoder).
-pub const MAX_RING: u16 = 1023;
+pub(crate) const MAX_RING: u16 = 1023;
 /// Ring counts a spinning LiDAR can have, for the recovered layouts.
 pub const RING_COUNTS: std::ops::RangeInclusive<usize> = 8..=256;
 

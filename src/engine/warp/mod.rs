@@ -26,7 +26,7 @@ use moved_vertices::{TransformCache, arrival_poses, warp_vertex};
 use raster::{rasterize_ring, rasterize_row};
 
 /// One scan's surface, ready to be warped.
-pub struct Source<'a> {
+pub(crate) struct Source<'a> {
     pub surfaces: &'a Surfaces,
     /// Absolute time of each cell's return, ns (meaningful where range is set).
     pub time_ns: &'a [StampNs],

@@ -27,8 +27,8 @@ pub use writer::SequencedWriter;
 pub const START_NS: i64 = 1_700_000_000_000_000_000;
 
 pub const LIDAR_FRAME: &str = "lidar";
-pub const VEHICLE_FRAME: &str = "imu_link";
-pub const ODOM_FRAME: &str = "odom";
+pub(crate) const VEHICLE_FRAME: &str = "imu_link";
+pub(crate) const ODOM_FRAME: &str = "odom";
 
 /// Topics of a synthetic log.
 pub mod topics {
@@ -117,7 +117,7 @@ impl Channels {
 
 /// One encoded message for the writer.
 #[derive(Debug, Clone)]
-pub struct Encoded {
+pub(crate) struct Encoded {
     pub channel: u16,
     pub log_time_ns: i64,
     pub data: Vec<u8>,
@@ -125,7 +125,7 @@ pub struct Encoded {
 
 /// Encodes a synthetic drive into messages, interval by interval. It does no
 /// I/O, so it can run on its own thread while [`SequencedWriter`] writes.
-pub struct SynthLog {
+pub(crate) struct SynthLog {
     channels: Channels,
     /// Motion messages are generated up to here (exclusive), seconds.
     motion_until_s: f64,

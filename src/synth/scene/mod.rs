@@ -49,7 +49,7 @@ pub struct Scenario {
 
 /// A piecewise-linear profile: `[time_s, value]` knots, held constant before the
 /// first and after the last.
-pub type Profile = Vec<[f64; 2]>;
+pub(crate) type Profile = Vec<[f64; 2]>;
 
 /// The ego vehicle: start pose and speed / yaw-rate profiles. The vehicle frame
 /// (`imu_link`) is x forward, y left, z up, `imu_height_m` above the road.
@@ -303,7 +303,7 @@ fn parse(origin: &str, text: &str) -> Result<Scenario, ScenarioError> {
 }
 
 /// Value of a piecewise-linear profile at `t_s` (0 for an empty profile).
-pub fn profile_at(profile: &Profile, t_s: f64) -> f64 {
+pub(crate) fn profile_at(profile: &Profile, t_s: f64) -> f64 {
     let Some(first) = profile.first() else {
         return 0.0;
     };
@@ -320,7 +320,7 @@ pub fn profile_at(profile: &Profile, t_s: f64) -> f64 {
 }
 
 /// Slope of a piecewise-linear profile at `t_s` (right derivative at knots).
-pub fn profile_slope_at(profile: &Profile, t_s: f64) -> f64 {
+pub(crate) fn profile_slope_at(profile: &Profile, t_s: f64) -> f64 {
     for w in profile.windows(2) {
         let ([t0, v0], [t1, v1]) = (w[0], w[1]);
         if t_s >= t0 && t_s < t1 {
