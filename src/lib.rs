@@ -5,17 +5,15 @@
 //! [`pairing`] (synchronised scan pairs) -> [`output`] (MCAP writer);
 //! [`pipeline`] wires them together on threads with bounded channels.
 
+pub use looming_core::{engine, events, model, pairing};
+
 pub mod annotate;
 pub mod budget;
 pub mod commands;
 pub mod decode;
-pub mod engine;
-pub mod events;
 pub mod input;
 pub mod kitti;
-pub mod model;
 pub mod output;
-pub mod pairing;
 pub mod pipeline;
 pub mod quality;
 pub mod ros;
@@ -26,6 +24,3 @@ pub mod synth;
 pub mod testkit;
 pub mod topics;
 pub mod truth;
-
-#[cfg(test)]
-mod test_rng;

@@ -1,6 +1,7 @@
 //! The layout the code promises (`docs/ARCHITECTURE.md`), checked on the
-//! source tree: no file over 500 lines of non-test code, no module importing
-//! a stage above it, no I/O in the pure modules.
+//! source trees of both crates: no file over 500 lines of non-test code, no
+//! module importing a stage above it, no I/O in the pure modules, and no log
+//! tooling among the core crate's dependencies.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -80,8 +81,18 @@ fn source_files(dir: &Path, files: &mut Vec<PathBuf>) {
     }
 }
 
-fn src_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+/// The source folders: the core crate's and this crate's.
+fn src_dirs() -> [PathBuf; 2] {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    [root.join("crates/looming-core/src"), root.join("src")]
+}
+
+fn all_source_files() -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for dir in src_dirs() {
+        source_files(&dir, &mut files);
+    }
+    files
 }
 
 /// The file's code outside `#[cfg(test)]` items, without comment or blank
@@ -142,7 +153,9 @@ fn skip_item(lines: &[&str], start: usize) -> usize {
 /// The top-level module a file of `src/` belongs to (`None`: lib.rs,
 /// main.rs and the binary's `cli/`).
 fn top_module(path: &Path) -> Option<String> {
-    let relative = path.strip_prefix(src_dir()).unwrap();
+    let relative = src_dirs()
+        .iter()
+        .find_map(|dir| path.strip_prefix(dir).ok())?;
     let first = relative.components().next()?.as_os_str().to_str()?;
     let name = first.trim_end_matches(".rs");
     (!matches!(name, "lib" | "main" | "cli" | "test_rng")).then(|| name.to_owned())
@@ -175,8 +188,7 @@ fn crate_uses(code: &[String]) -> Vec<String> {
 
 #[test]
 fn no_file_holds_more_than_500_lines_of_non_test_code() {
-    let mut files = Vec::new();
-    source_files(&src_dir(), &mut files);
+    let files = all_source_files();
     let too_long: BTreeMap<String, usize> = files
         .iter()
         .map(|path| (path.display().to_string(), non_test_code(path).len()))
@@ -190,8 +202,7 @@ fn no_file_holds_more_than_500_lines_of_non_test_code() {
 
 #[test]
 fn no_module_uses_a_stage_above_it() {
-    let mut files = Vec::new();
-    source_files(&src_dir(), &mut files);
+    let files = all_source_files();
     let mut wrong = Vec::new();
     for path in &files {
         let Some(module) = top_module(path) else {
@@ -215,8 +226,7 @@ fn no_module_uses_a_stage_above_it() {
 
 #[test]
 fn the_pure_modules_do_no_io() {
-    let mut files = Vec::new();
-    source_files(&src_dir(), &mut files);
+    let files = all_source_files();
     let mut wrong = Vec::new();
     for path in &files {
         let Some(module) = top_module(path) else {
@@ -232,4 +242,24 @@ fn the_pure_modules_do_no_io() {
         }
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+#[test]
+fn the_core_crate_has_no_log_tooling_among_its_dependencies() {
+    let manifest = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/looming-core/Cargo.toml"),
+    )
+    .unwrap();
+    let dependencies = manifest
+        .split("[dependencies]")
+        .nth(1)
+        .and_then(|rest| rest.split("\n[").next())
+        .unwrap();
+    let names: Vec<&str> = dependencies
+        .lines()
+        .filter_map(|line| line.split('=').next())
+        .map(str::trim)
+        .filter(|name| !name.is_empty() && !name.starts_with('#'))
+        .collect();
+    assert_eq!(names, ["nalgebra", "rayon", "serde", "thiserror"]);
 }

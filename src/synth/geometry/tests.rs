@@ -3,7 +3,7 @@
 use super::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use crate::test_rng::SplitMix64;
+use looming_core::test_rng::SplitMix64;
 
 /// Unit direction from azimuth (about +z from +x) and elevation (from the
 /// xy plane, positive up).

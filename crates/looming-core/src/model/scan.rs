@@ -1,5 +1,5 @@
 //! One LiDAR scan as decoded: the valid points of a cloud with their optional
-//! attributes, in the cloud's own frame. The decoders in `crate::decode` fill
+//! attributes, in the cloud's own frame. The decoders of the `looming` crate fill
 //! it, `engine::layout::complete` completes its rings and times.
 
 use nalgebra::Isometry3;

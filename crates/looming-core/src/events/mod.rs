@@ -19,10 +19,11 @@ pub use cluster::{Cluster, ColSpan, hot_clusters};
 pub use corridor::{Corridor, PathSource};
 
 /// Schema of one event (`/looming/events` and the `--events` file's entries).
-pub const EVENT_SCHEMA: &str = include_str!("../../schemas/looming.NearMissEvent.schema.json");
+pub const EVENT_SCHEMA: &str =
+    include_str!("../../../../schemas/looming.NearMissEvent.schema.json");
 /// Schema of the `--events` file.
 pub const EVENTS_FILE_SCHEMA: &str =
-    include_str!("../../schemas/looming.NearMissEvents.schema.json");
+    include_str!("../../../../schemas/looming.NearMissEvents.schema.json");
 
 /// Scan times kept per event (an event longer than this keeps its first ones).
 const MAX_SCAN_TIMES: usize = 600;

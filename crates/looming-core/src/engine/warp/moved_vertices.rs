@@ -208,20 +208,39 @@ const ATAN_SERIES: [f64; 8] = [
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     #[test]
     fn cached_transforms_are_the_trajectorys_relative_ones_bit_for_bit() {
-        let mut scenario = crate::synth::scene::load("urban-turn").unwrap();
-        scenario.lidar.beams = 16;
-        scenario.lidar.columns = 64;
-        let world = crate::synth::sensor::World::new(scenario);
-        let pair = crate::synth::simulated_pair(&world, 12, 1);
-        let (start_ns, end_ns) = (
-            pair.previous.stamp_ns - 1_000_000,
-            pair.current.stamp_ns + 101_000_000,
-        );
+        // A turning, accelerating drive sampled at 100 Hz around a 10 Hz
+        // scan pair: velocity and yaw rate change from sample to sample.
+        let previous_ns: StampNs = 1_700_000_001_200_000_000;
+        let current_ns = previous_ns + 100_000_000;
+        let series = |value_at: &dyn Fn(f64) -> Vector3<f64>| {
+            let samples = (0..50)
+                .map(|i| {
+                    let t_s = f64::from(i) * 0.01;
+                    (
+                        previous_ns - 200_000_000 + i64::from(i) * 10_000_000,
+                        value_at(t_s),
+                    )
+                })
+                .collect();
+            crate::model::TimeSeries::new(samples, 0.2)
+        };
+        let motion = crate::model::PairMotion {
+            velocity: Some(series(&|t| Vector3::new(8.0 + 2.0 * t, 0.5 * t, 0.02))),
+            angular: Some(series(&|t| Vector3::new(0.01, -0.02, 0.3 + 0.5 * t))),
+            angular_source: crate::model::AngularSource::Imu,
+            velocity_extrinsic: None,
+            imu_extrinsic: None,
+            velocity_unavailable: false,
+            imu_unavailable: false,
+            coverage_complete: true,
+        };
+        let (start_ns, end_ns) = (previous_ns - 1_000_000, current_ns + 101_000_000);
         let trajectory = Trajectory::integrate(
-            &pair.motion,
+            &motion,
             crate::engine::trajectory::MotionModel::Full,
             true,
             start_ns,
@@ -229,9 +248,8 @@ mod tests {
         )
         .unwrap();
         // Columns fired every 1.5625 ms over the current sweep, one without a time.
-        let mut column_time_ns: Vec<StampNs> = (0..64)
-            .map(|c| pair.current.stamp_ns + c * 1_562_500)
-            .collect();
+        let mut column_time_ns: Vec<StampNs> =
+            (0..64).map(|c| current_ns + c * 1_562_500).collect();
         column_time_ns[7] = StampNs::MIN;
         let arrivals = arrival_poses(&column_time_ns, &trajectory);
         let mut cache = TransformCache::new(&trajectory, &arrivals);
@@ -246,7 +264,7 @@ mod tests {
         // Departures repeating and changing, arrivals in columns and at
         // times, the column cache wrapping round.
         for k in 0..400i64 {
-            let from_ns = pair.previous.stamp_ns + (k / 3) * 700_000;
+            let from_ns = previous_ns + (k / 3) * 700_000;
             let to_ns = from_ns + 100_000_000 + (k % 5) * 333_333;
             assert!(same(
                 cache.until(from_ns, to_ns),
