@@ -1,9 +1,14 @@
 //! `looming`: looming (inverse time to contact) from LiDAR drive logs in MCAP.
 //!
-//! Pipeline stages, one module each:
-//! [`input`] (streaming MCAP reader) -> [`decode`] (typed messages) ->
-//! [`pairing`] (synchronised scan pairs) -> [`output`] (MCAP writer);
-//! [`pipeline`] wires them together on threads with bounded channels.
+//! The math and the plain data live in the `looming-core` crate, re-exported
+//! here: [`model`], [`pairing`], [`engine`], [`events`]. This crate reads and
+//! writes the logs: [`input`] (streaming MCAP reader) -> [`decode`] (typed
+//! messages) -> [`pairing`] (synchronised scan pairs) -> [`annotate`] (the
+//! engine, near misses and our channels) -> [`output`] (MCAP writer);
+//! [`pipeline`] wires them together on threads with bounded channels
+//! ([`pipeline::process`]) or replays a log's pairs on one thread
+//! ([`pipeline::replay()`]). [`commands`] holds the other commands; [`synth`]
+//! and [`kitti`] write logs. `docs/ARCHITECTURE.md` draws the layers.
 
 pub use looming_core::{engine, events, model, pairing};
 

@@ -26,7 +26,7 @@ pub(crate) const STEPS: u8 = 16;
 pub(crate) const LEVELS: f32 = STEPS as f32;
 
 /// The looming scale: the square root of `|L| / 1 1/s` (clamped to 1, in
-/// [`LEVELS`] steps) blends [`ZERO`] into red (L > 0) or blue (L < 0); the
+/// `LEVELS` steps) blends `ZERO` into red (L > 0) or blue (L < 0); the
 /// square root spreads the small values that make up most of a scene. NaN is
 /// [`MASKED`].
 pub fn looming(looming_per_s: f32) -> Rgba {
@@ -101,7 +101,7 @@ pub(crate) fn looming_index(looming_per_s: f32) -> u8 {
 }
 
 /// The RGB colours of the range-image palette, by index: [`EMPTY`],
-/// [`MASKED`], [`ZERO`], then steps 1 to [`STEPS`], each approaching then
+/// [`MASKED`], `ZERO`, then steps 1 to `STEPS`, each approaching then
 /// receding. `image_palette()[looming_index(L)]` is `looming(L)` without
 /// alpha.
 pub fn image_palette() -> [[u8; 3]; PALETTE_LEN] {
@@ -121,7 +121,7 @@ pub fn image_palette() -> [[u8; 3]; PALETTE_LEN] {
     palette
 }
 
-/// Yellow, orange, red for low, medium, high; [`ZERO`] for none.
+/// Yellow, orange, red for low, medium, high; `ZERO` for none.
 pub fn threat(level: ThreatLevel) -> Rgba {
     match level {
         ThreatLevel::None => ZERO,

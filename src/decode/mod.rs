@@ -169,7 +169,7 @@ fn decode_ros<'a, R: WireRead<'a>>(
 }
 
 /// `sensor_msgs/Imu` to [`ImuSample`]. The orientation is dropped when the
-/// driver marks it unknown (covariance[0] == -1, per the message docs) or
+/// driver marks it unknown (`covariance[0] == -1`, per the message docs) or
 /// leaves it all zeros (common in drivers without an orientation filter).
 pub fn imu_sample_from_imu(msg: &Imu) -> ImuSample {
     let q = msg.orientation;

@@ -7,7 +7,7 @@
 //! - **linear**: no summary, an unchunked file, or a truncated one. A first pass
 //!   lists schemas and channels (so topic detection and our own ids are decided
 //!   before anything is written), the second streams records in file order
-//!   through a bounded reorder window ([`reorder`]) that restores log-time order
+//!   through a bounded reorder window (`reorder`) that restores log-time order
 //!   for the usual small disorder between recorder threads.
 //!
 //! Either way memory is bounded by the largest chunk or record, never by the
@@ -17,7 +17,7 @@
 //! An indexed file whose messages are all indexed and already in log-time
 //! order in the file can also be read for a pass-through output
 //! ([`InputFile::read_copying`]): each chunk record whole, as stored, with its
-//! message index records ([`chunks`]).
+//! message index records (`chunks`).
 
 mod catalog;
 mod chunks;

@@ -3,7 +3,7 @@
 //! and adds our own channels under ids the input does not use.
 //!
 //! Two backends: the rewrite ([`mcap::Writer`]: every message written anew
-//! into new chunks) and the pass-through ([`passthrough`]: the input's chunk
+//! into new chunks) and the pass-through (`passthrough`: the input's chunk
 //! records copied byte for byte, our messages in chunks of their own,
 //! compressed in parallel). Either way the output goes to a temporary file
 //! beside the destination and is renamed only when complete ([`AtomicFile`]),

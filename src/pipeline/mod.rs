@@ -5,7 +5,7 @@
 //! bytes.
 //!
 //! `scans` turns messages into scan pairs (shared with `eval` and `render`
-//! through [`replay`]), `stages` runs `process`'s threads, `summary` reports
+//! through [`replay()`]), `stages` runs `process`'s threads, `summary` reports
 //! the run, `replace` guards against processing an annotated log twice.
 
 mod replace;

@@ -1,6 +1,6 @@
 //! Replaying a log into scan pairs on the calling thread, without writing
 //! anything: what `eval`, `render`, benchmarks and tools need. It decodes and
-//! pairs with the very code `process` runs on its threads ([`super::scans`]),
+//! pairs with the very code `process` runs on its threads (`pipeline::scans`),
 //! with the same [`ScanOptions`], so all of them see the same pairs and count
 //! the same bad messages.
 

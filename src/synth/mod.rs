@@ -2,7 +2,7 @@
 //!
 //! A scenario ([`scene`]) is simulated by a rolling-sweep LiDAR ([`sensor`]) ray
 //! cast ([`geometry`]) against a scene moving with exact kinematics
-//! ([`kinematics`]); [`encode`] turns the result into ROS 2 CDR messages and
+//! ([`kinematics`]); `encode` turns the result into ROS 2 CDR messages and
 //! truth records, written with the same MCAP writer as `looming process`.
 
 mod encode;

@@ -128,7 +128,7 @@ impl BeamTable {
         }
     }
 
-    /// Continuous row coordinate: piecewise-linear between beam elevations (row k at elevations_rad[k]),
+    /// Continuous row coordinate: piecewise-linear between beam elevations (row `k` at `elevations_rad[k]`),
     /// extrapolated linearly with the end spacing outside the table.
     /// A table of fewer than 2 beams gives 0 everywhere.
     pub fn row_f(&self, elevation_rad: f64) -> f64 {

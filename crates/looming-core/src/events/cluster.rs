@@ -91,8 +91,8 @@ impl ColSpan {
 }
 
 /// Cells within reach of the event threshold (at least
-/// [`CANDIDATE_FRACTION`] of it) on a surface facing the sensor, grouped by
-/// 8-connectivity (see [`event_looming`] for the cells that take part); the
+/// `CANDIDATE_FRACTION` of it) on a surface facing the sensor, grouped by
+/// 8-connectivity (see `event_looming` for the cells that take part); the
 /// clusters whose median looming reaches the threshold. Judging the median of
 /// a region rather than counting cells above the threshold keeps noise from
 /// lifting a face that looms just below it, and edge spikes from setting it; the clusters of at

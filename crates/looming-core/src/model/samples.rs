@@ -14,7 +14,7 @@ pub struct ImuSample {
     pub angular_velocity_radps: Vector3<f64>,
     /// Specific force in the IMU frame (gravity included), m/s^2.
     pub linear_acceleration_mps2: Vector3<f64>,
-    /// Orientation estimate, when the driver provides one (covariance[0] != -1).
+    /// Orientation estimate, when the driver provides one (`covariance[0] != -1`).
     pub orientation: Option<UnitQuaternion<f64>>,
 }
 

@@ -44,7 +44,7 @@ const AZIMUTH_CUT_MIN_HANDOVER_RAD: f64 = 0.1 * PI / 180.0;
 /// is a sliver (fewer than 1/20 of the mean points).
 ///
 /// The cut (where the lists start) is where the elevation hands over from
-/// one laser to the next ([`list_cut`]).
+/// one laser to the next (`list_cut`).
 ///
 /// The sweep: the direction above; the seam where the lists start, unless
 /// the lists hand over from laser to laser at one common azimuth (the

@@ -1,6 +1,6 @@
 //! The engine's front end: recovers the ring (beam, image row) and the time
 //! of every point for every cloud layout met in real logs, and names what it
-//! used ([`ScanLayout`]). Pure: no I/O.
+//! used ([`ScanLayout`](crate::model::ScanLayout)). Pure: no I/O.
 //!
 //! Rings, first that applies:
 //! 1. organized clouds (`height > 1`): the row of the point;
