@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use crate::input::{Flow, InputError, InputFile, InputOptions, InputRecord};
+use super::annotated::read_json_channel;
+use crate::input::{InputError, InputFile, InputOptions};
 
 use crate::events::NearMissEvent;
 
@@ -32,29 +33,18 @@ pub fn read_events(path: &Path) -> Result<Vec<NearMissEvent>, ListingError> {
         .map(|c| c.id)
         .ok_or_else(|| ListingError::NotAnnotated { path: name.clone() })?;
     let mut events = Vec::new();
-    let mut bad = None;
-    input.read_records(false, &mut |record| {
-        if let InputRecord::Message(message) = record
-            && message.channel_id == channel
-        {
-            match serde_json::from_slice::<NearMissEvent>(&message.data) {
-                Ok(event) => events.push(event),
-                Err(error) => {
-                    bad = Some(ListingError::BadEvent {
-                        path: name.clone(),
-                        log_time_ns: message.log_time_ns,
-                        reason: error.to_string(),
-                    });
-                    return Flow::Break(());
-                }
-            }
-        }
-        Flow::Continue(())
+    read_json_channel(
+        &input,
+        channel,
+        &mut |event| events.push(event),
+        &mut |_| {},
+    )?
+    .map_err(|bad| ListingError::BadEvent {
+        path: name,
+        log_time_ns: bad.log_time_ns,
+        reason: bad.reason,
     })?;
-    match bad {
-        Some(error) => Err(error),
-        None => Ok(events),
-    }
+    Ok(events)
 }
 
 /// The events as a table, one line each.

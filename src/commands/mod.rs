@@ -5,6 +5,7 @@
 //! against ground truth).
 //! They use the pipeline's stages; no stage uses them.
 
+mod annotated;
 pub mod eval;
 pub mod events;
 pub mod inspect;

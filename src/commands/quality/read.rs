@@ -9,7 +9,8 @@ use super::QualityError;
 use super::report::QualityReport;
 use super::totals::Builder;
 use crate::annotate::topics::{EVENTS_TOPIC, PAIRS_TOPIC};
-use crate::input::{Flow, InputFile, InputOptions, InputRecord};
+use crate::commands::annotated::read_json_channel;
+use crate::input::{InputFile, InputOptions};
 use crate::quality::PairQuality;
 
 /// What `quality` reads of a `/looming/pairs` message (unknown fields, such
@@ -61,31 +62,22 @@ pub fn read_quality(path: &Path) -> Result<QualityReport, QualityError> {
         .values()
         .find(|c| c.topic == EVENTS_TOPIC)
         .map(|c| c.id);
-    let mut builder = Builder::default();
-    let mut bad = None;
-    input.read_records(false, &mut |record| {
-        let InputRecord::Message(message) = record else {
-            return Flow::Continue(());
-        };
-        if Some(message.channel_id) == events_channel {
-            builder.count_event();
-        } else if message.channel_id == pairs_channel {
-            match serde_json::from_slice::<PairMessage>(&message.data) {
-                Ok(pair) => builder.add(pair),
-                Err(error) => {
-                    bad = Some(QualityError::BadRecord {
-                        path: name.clone(),
-                        log_time_ns: message.log_time_ns,
-                        reason: error.to_string(),
-                    });
-                    return Flow::Break(());
-                }
+    // Both callbacks add to the builder, one at a time.
+    let builder = std::cell::RefCell::new(Builder::default());
+    read_json_channel(
+        &input,
+        pairs_channel,
+        &mut |pair: PairMessage| builder.borrow_mut().add(pair),
+        &mut |channel| {
+            if Some(channel) == events_channel {
+                builder.borrow_mut().count_event();
             }
-        }
-        Flow::Continue(())
+        },
+    )?
+    .map_err(|bad| QualityError::BadRecord {
+        path: name.clone(),
+        log_time_ns: bad.log_time_ns,
+        reason: bad.reason,
     })?;
-    if let Some(error) = bad {
-        return Err(error);
-    }
-    Ok(builder.finish(name))
+    Ok(builder.into_inner().finish(name))
 }
