@@ -71,34 +71,58 @@ impl Totals {
         self.ms += ms;
         self.rows = r.geometry.rows;
         if std::env::var("AHEAD").is_ok() {
-            // Returns in the lane ahead, above the road: a vehicle's rear face.
-            let mut xs: Vec<f32> = scan
-                .points_m
-                .iter()
-                .filter(|p| {
-                    p[0] > 2.5 && p[0] < 15.0 && p[1].abs() < 1.2 && p[2] > -1.2 && p[2] < 0.5
-                })
-                .map(|p| p[0])
-                .collect();
-            xs.sort_by(f32::total_cmp);
-            let near = xs.get(xs.len() / 10).copied().unwrap_or(f32::NAN);
-            println!(
-                "  ahead: {} returns in the lane 2.5-15 m, near face at {:.2} m",
-                xs.len(),
-                near
-            );
+            print_returns_in_lane_ahead(scan);
         }
-        let mut trusted = 0;
-        for i in 0..scan.points_m.len() {
-            if let Some(cell) = r.image.surface_cell(i)
-                && r.mask[cell] == 0
-            {
-                trusted += 1;
-            }
-        }
+        let trusted = trusted_point_count(scan, r);
         self.points += scan.points_m.len();
         self.trusted_points += trusted;
-        // Ground: upward normal, below the sensor.
+        let mut heights = self.count_occupied_and_ground_heights_m(scan, r);
+        if std::env::var("DIAG_NORMALS").is_ok() {
+            print_ground_normal_tilt_deg(scan, r);
+        }
+        heights.sort_by(f32::total_cmp);
+        let ground_z = heights.get(heights.len() / 2).copied().unwrap_or(f32::NAN);
+        let mut pair_ground = self.collect_static_ground(scan, r, ground_z);
+        if std::env::var("DIAG_BIAS").is_ok() {
+            ring_bias(scan, r);
+        }
+        if std::env::var("DIAG_FIT").is_ok() {
+            ground_fit(scan, r, ground_z);
+        }
+        print_neighbour_normals_apart(r);
+        if let Ok(png) = std::env::var("DIAG_PNG")
+            && self.pairs == 2
+        {
+            mask_png(r, &png);
+            value_png(&r.l_lidar, r, &png.replace(".png", "_lidar.png"));
+            value_png(&r.l_ray_ego, r, &png.replace(".png", "_rayego.png"));
+            value_png(&r.fused, r, &png.replace(".png", "_fused.png"));
+        }
+        if std::env::var("DIAG_ROWS").is_ok() {
+            print_mask_shares_per_row(r);
+        }
+        if let Some(e) = &r.ego_estimate {
+            print_ego_estimate(e);
+        }
+        println!(
+            "pair {:3}: {:5.1} % trusted, ground {} cells median |fused| {:.4}, ground z {:.2}, {:.0} ms",
+            self.pairs - 1,
+            100.0 * trusted as f64 / scan.points_m.len() as f64,
+            pair_ground.len(),
+            median(&mut pair_ground),
+            ground_z,
+            ms
+        );
+    }
+
+    /// Counts the occupied cells and their mask bits; returns the heights
+    /// (metres) of the cells that look like ground: upward normal, below the
+    /// sensor.
+    fn count_occupied_and_ground_heights_m(
+        &mut self,
+        scan: &Scan,
+        r: &engine::PairLooming,
+    ) -> Vec<f32> {
         let mut heights = Vec::new();
         for cell in 0..r.geometry.cells() {
             let m = r.mask[cell];
@@ -116,24 +140,17 @@ impl Totals {
                 heights.push(p[2]);
             }
         }
-        if std::env::var("DIAG_NORMALS").is_ok() {
-            let mut tilts: Vec<f32> = (0..r.geometry.cells())
-                .filter(|&c| r.mask[c] & mask::EMPTY == 0 && r.normal[c][2] > 0.7)
-                .filter(|&c| scan.points_m[r.image.point[c] as usize][2] < -1.4)
-                .map(|c| r.normal[c][2].clamp(-1.0, 1.0).acos().to_degrees())
-                .collect();
-            tilts.sort_by(f32::total_cmp);
-            let q = |f: f64| quantile(&tilts, f);
-            println!(
-                "  ground normal tilt deg p50 {:.1} p75 {:.1} p90 {:.1} of {}",
-                q(0.5),
-                q(0.75),
-                q(0.9),
-                tilts.len()
-            );
-        }
-        heights.sort_by(f32::total_cmp);
-        let ground_z = heights.get(heights.len() / 2).copied().unwrap_or(f32::NAN);
+        heights
+    }
+
+    /// Adds the trusted static ground cells near `ground_z` (metres) to the
+    /// totals, and every static cell's |D|; returns this pair's ground |fused|.
+    fn collect_static_ground(
+        &mut self,
+        scan: &Scan,
+        r: &engine::PairLooming,
+        ground_z: f32,
+    ) -> Vec<f32> {
         let mut pair_ground = Vec::new();
         for cell in 0..r.geometry.cells() {
             if r.mask[cell] != 0 || r.moving[cell] {
@@ -143,126 +160,37 @@ impl Totals {
             let range = (p[0] * p[0] + p[1] * p[1]).sqrt();
             if r.normal[cell][2] > 0.96 && (p[2] - ground_z).abs() < 0.2 + 0.01 * range {
                 pair_ground.push(r.fused[cell].abs());
-                self.ground_signed[0].push(r.l_lidar[cell]);
-                self.ground_signed[1].push(r.l_ray_ego[cell]);
-                self.ground_signed[2].push(r.fused[cell]);
-                let row = cell / r.geometry.cols;
-                if self.ground_rows.len() < r.geometry.rows {
-                    self.ground_rows.resize(r.geometry.rows, (0.0, 0.0, 0));
-                }
-                if r.l_ray_ego[cell].is_finite() {
-                    let g = &mut self.ground_rows[row];
-                    g.0 += f64::from(r.l_lidar[cell]);
-                    g.1 += f64::from(r.l_ray_ego[cell]);
-                    g.2 += 1;
-                }
-                self.ground_fused.push(r.fused[cell].abs());
-                if p[1] > 0.0 {
-                    self.ground_lidar_left.push(r.l_lidar[cell]);
-                } else {
-                    self.ground_lidar_right.push(r.l_lidar[cell]);
-                }
+                self.add_ground_cell(r, cell, p);
             }
             let d = r.disagreement[cell];
             if d.is_finite() {
                 self.static_d.push(d.abs());
             }
         }
-        if std::env::var("DIAG_BIAS").is_ok() {
-            ring_bias(scan, r);
+        pair_ground
+    }
+
+    /// One trusted static ground cell at point `p` (metres).
+    fn add_ground_cell(&mut self, r: &engine::PairLooming, cell: usize, p: [f32; 3]) {
+        self.ground_signed[0].push(r.l_lidar[cell]);
+        self.ground_signed[1].push(r.l_ray_ego[cell]);
+        self.ground_signed[2].push(r.fused[cell]);
+        let row = cell / r.geometry.cols;
+        if self.ground_rows.len() < r.geometry.rows {
+            self.ground_rows.resize(r.geometry.rows, (0.0, 0.0, 0));
         }
-        if std::env::var("DIAG_FIT").is_ok() {
-            ground_fit(scan, r, ground_z);
+        if r.l_ray_ego[cell].is_finite() {
+            let g = &mut self.ground_rows[row];
+            g.0 += f64::from(r.l_lidar[cell]);
+            g.1 += f64::from(r.l_ray_ego[cell]);
+            g.2 += 1;
         }
-        {
-            let cols = r.geometry.cols;
-            let (mut n_pairs, mut bad, mut bad_vert) = (0, 0, 0);
-            for cell in 0..r.geometry.cells() - cols {
-                let (a, b, c) = (
-                    r.normal[cell],
-                    r.normal[cell - cell % cols + (cell % cols + 1) % cols],
-                    r.normal[cell + cols],
-                );
-                let known = |n: [f32; 3]| n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.5;
-                if known(a) && known(b) && known(c) {
-                    n_pairs += 1;
-                    if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() < 0.906 {
-                        bad += 1;
-                    }
-                    if (a[0] * c[0] + a[1] * c[1] + a[2] * c[2]).abs() < 0.906 {
-                        bad_vert += 1;
-                    }
-                }
-            }
-            println!(
-                "  neighbour normals >25 deg apart: along row {:.1} %, across rows {:.1} %",
-                100.0 * bad as f64 / n_pairs as f64,
-                100.0 * bad_vert as f64 / n_pairs as f64
-            );
+        self.ground_fused.push(r.fused[cell].abs());
+        if p[1] > 0.0 {
+            self.ground_lidar_left.push(r.l_lidar[cell]);
+        } else {
+            self.ground_lidar_right.push(r.l_lidar[cell]);
         }
-        if let Ok(png) = std::env::var("DIAG_PNG")
-            && self.pairs == 2
-        {
-            mask_png(r, &png);
-            value_png(&r.l_lidar, r, &png.replace(".png", "_lidar.png"));
-            value_png(&r.l_ray_ego, r, &png.replace(".png", "_rayego.png"));
-            value_png(&r.fused, r, &png.replace(".png", "_fused.png"));
-        }
-        if std::env::var("DIAG_ROWS").is_ok() {
-            let cols = r.geometry.cols;
-            for row in 0..r.geometry.rows {
-                let mut counts = [0usize; 7];
-                for cell in row * cols..(row + 1) * cols {
-                    if r.mask[cell] & mask::EMPTY != 0 {
-                        continue;
-                    }
-                    counts[6] += 1;
-                    for (bit, c) in counts.iter_mut().enumerate().take(6) {
-                        if r.mask[cell] & (1 << bit) != 0 {
-                            *c += 1;
-                        }
-                    }
-                    if r.mask[cell] == 0 {
-                        counts[0] += 1;
-                    }
-                }
-                let n = counts[6].max(1) as f64;
-                println!(
-                    "  row {row:2} elev {:+6.2} par {:+.3} noise {:.3}: {:5} cells trusted {:3.0}% noprev {:3.0}% edge {:3.0}% grazing {:3.0}% occl {:3.0}%",
-                    r.geometry.beams.elevations_rad[row].to_degrees(),
-                    r.geometry.parallax_rad_m.as_ref().map_or(0.0, |p| p[row]),
-                    r.range_noise_m_per_row[row],
-                    counts[6],
-                    100.0 * counts[0] as f64 / n,
-                    100.0 * counts[1] as f64 / n,
-                    100.0 * counts[2] as f64 / n,
-                    100.0 * counts[3] as f64 / n,
-                    100.0 * counts[5] as f64 / n,
-                );
-            }
-        }
-        if let Some(e) = &r.ego_estimate {
-            println!(
-                "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m",
-                e.velocity_mps[0],
-                e.velocity_mps[1],
-                e.velocity_mps[2],
-                e.angular_velocity_radps[0],
-                e.angular_velocity_radps[1],
-                e.angular_velocity_radps[2],
-                e.inlier_cells,
-                e.residual_m
-            );
-        }
-        println!(
-            "pair {:3}: {:5.1} % trusted, ground {} cells median |fused| {:.4}, ground z {:.2}, {:.0} ms",
-            self.pairs - 1,
-            100.0 * trusted as f64 / scan.points_m.len() as f64,
-            pair_ground.len(),
-            median(&mut pair_ground),
-            ground_z,
-            ms
-        );
     }
 
     fn print(&mut self) {
@@ -327,6 +255,133 @@ impl Totals {
     }
 }
 
+/// Returns in the lane ahead, above the road: a vehicle's rear face.
+fn print_returns_in_lane_ahead(scan: &Scan) {
+    let mut xs: Vec<f32> = scan
+        .points_m
+        .iter()
+        .filter(|p| p[0] > 2.5 && p[0] < 15.0 && p[1].abs() < 1.2 && p[2] > -1.2 && p[2] < 0.5)
+        .map(|p| p[0])
+        .collect();
+    xs.sort_by(f32::total_cmp);
+    let near = xs.get(xs.len() / 10).copied().unwrap_or(f32::NAN);
+    println!(
+        "  ahead: {} returns in the lane 2.5-15 m, near face at {:.2} m",
+        xs.len(),
+        near
+    );
+}
+
+/// How many of the scan's points land in a cell the mask trusts.
+fn trusted_point_count(scan: &Scan, r: &engine::PairLooming) -> usize {
+    let mut trusted = 0;
+    for i in 0..scan.points_m.len() {
+        if let Some(cell) = r.image.surface_cell(i)
+            && r.mask[cell] == 0
+        {
+            trusted += 1;
+        }
+    }
+    trusted
+}
+
+/// Quantiles of the tilt from vertical of the low ground's normals.
+fn print_ground_normal_tilt_deg(scan: &Scan, r: &engine::PairLooming) {
+    let mut tilts: Vec<f32> = (0..r.geometry.cells())
+        .filter(|&c| r.mask[c] & mask::EMPTY == 0 && r.normal[c][2] > 0.7)
+        .filter(|&c| scan.points_m[r.image.point[c] as usize][2] < -1.4)
+        .map(|c| r.normal[c][2].clamp(-1.0, 1.0).acos().to_degrees())
+        .collect();
+    tilts.sort_by(f32::total_cmp);
+    let q = |f: f64| quantile(&tilts, f);
+    println!(
+        "  ground normal tilt deg p50 {:.1} p75 {:.1} p90 {:.1} of {}",
+        q(0.5),
+        q(0.75),
+        q(0.9),
+        tilts.len()
+    );
+}
+
+/// Share of neighbouring known normals more than 25 degrees apart, along a
+/// row and across rows.
+fn print_neighbour_normals_apart(r: &engine::PairLooming) {
+    let cols = r.geometry.cols;
+    let (mut n_pairs, mut bad, mut bad_vert) = (0, 0, 0);
+    for cell in 0..r.geometry.cells() - cols {
+        let (a, b, c) = (
+            r.normal[cell],
+            r.normal[cell - cell % cols + (cell % cols + 1) % cols],
+            r.normal[cell + cols],
+        );
+        let known = |n: [f32; 3]| n[0] * n[0] + n[1] * n[1] + n[2] * n[2] > 0.5;
+        if known(a) && known(b) && known(c) {
+            n_pairs += 1;
+            if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() < 0.906 {
+                bad += 1;
+            }
+            if (a[0] * c[0] + a[1] * c[1] + a[2] * c[2]).abs() < 0.906 {
+                bad_vert += 1;
+            }
+        }
+    }
+    println!(
+        "  neighbour normals >25 deg apart: along row {:.1} %, across rows {:.1} %",
+        100.0 * bad as f64 / n_pairs as f64,
+        100.0 * bad_vert as f64 / n_pairs as f64
+    );
+}
+
+/// Per row: occupied cells, and the share trusted and with each mask bit.
+fn print_mask_shares_per_row(r: &engine::PairLooming) {
+    let cols = r.geometry.cols;
+    for row in 0..r.geometry.rows {
+        let mut counts = [0usize; 7];
+        for cell in row * cols..(row + 1) * cols {
+            if r.mask[cell] & mask::EMPTY != 0 {
+                continue;
+            }
+            counts[6] += 1;
+            for (bit, c) in counts.iter_mut().enumerate().take(6) {
+                if r.mask[cell] & (1 << bit) != 0 {
+                    *c += 1;
+                }
+            }
+            if r.mask[cell] == 0 {
+                counts[0] += 1;
+            }
+        }
+        let n = counts[6].max(1) as f64;
+        println!(
+            "  row {row:2} elev {:+6.2} par {:+.3} noise {:.3}: {:5} cells trusted {:3.0}% noprev {:3.0}% edge {:3.0}% grazing {:3.0}% occl {:3.0}%",
+            r.geometry.beams.elevations_rad[row].to_degrees(),
+            r.geometry.parallax_rad_m.as_ref().map_or(0.0, |p| p[row]),
+            r.range_noise_m_per_row[row],
+            counts[6],
+            100.0 * counts[0] as f64 / n,
+            100.0 * counts[1] as f64 / n,
+            100.0 * counts[2] as f64 / n,
+            100.0 * counts[3] as f64 / n,
+            100.0 * counts[5] as f64 / n,
+        );
+    }
+}
+
+/// The engine's own motion estimate for the pair.
+fn print_ego_estimate(e: &engine::egomotion::EgoEstimate) {
+    println!(
+        "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m",
+        e.velocity_mps[0],
+        e.velocity_mps[1],
+        e.velocity_mps[2],
+        e.angular_velocity_radps[0],
+        e.angular_velocity_radps[1],
+        e.angular_velocity_radps[2],
+        e.inlier_cells,
+        e.residual_m
+    );
+}
+
 /// The `f` quantile of sorted values (NaN when empty).
 fn quantile(sorted: &[f32], f: f64) -> f32 {
     sorted
@@ -380,6 +435,113 @@ fn cell_png(r: &engine::PairLooming, path: &str, colour_of: impl Fn(usize) -> [u
     img.save(path).expect("png");
 }
 
+/// Trusted static ground cells of one looming image, as least-squares rows
+/// `([1, e_y / s, e_x / s], L)` with each cell's range (metres) and azimuth
+/// (radians).
+struct GroundFitSamples {
+    rows: Vec<([f64; 3], f64)>,
+    ranges_m: Vec<f32>,
+    azimuths_rad: Vec<f32>,
+}
+
+/// The trusted static ground near `ground_z` (metres) in `values`.
+fn ground_fit_samples(
+    scan: &Scan,
+    r: &engine::PairLooming,
+    values: &[f32],
+    ground_z: f32,
+) -> GroundFitSamples {
+    let mut rows = Vec::new();
+    let mut ranges: Vec<f32> = Vec::new();
+    let mut azimuths: Vec<f32> = Vec::new();
+    for (cell, &value) in values.iter().enumerate() {
+        if r.mask[cell] != 0 || r.moving[cell] || !value.is_finite() {
+            continue;
+        }
+        let p = scan.points_m[r.image.point[cell] as usize];
+        let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        let flat = (p[0] * p[0] + p[1] * p[1]).sqrt();
+        if r.normal[cell][2] > 0.96 && (p[2] - ground_z).abs() < 0.2 + 0.01 * flat {
+            let s = -p[2] / range;
+            ranges.push(range);
+            azimuths.push(p[1].atan2(p[0]));
+            rows.push((
+                [
+                    1.0f64,
+                    f64::from(p[1] / range / s),
+                    f64::from(p[0] / range / s),
+                ],
+                f64::from(value),
+            ));
+        }
+    }
+    GroundFitSamples {
+        rows,
+        ranges_m: ranges,
+        azimuths_rad: azimuths,
+    }
+}
+
+/// Adds one least-squares row `x . k = y` to the normal equations.
+fn add_normal_equation(
+    (ata, atb): &mut (nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>),
+    x: [f64; 3],
+    y: f64,
+) {
+    let v = nalgebra::Vector3::from(x);
+    *ata += v * v.transpose();
+    *atb += v * y;
+}
+
+/// The least-squares solution of the normal equations, if they are regular.
+fn solve_normal_equations(
+    (ata, atb): &(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>),
+) -> Option<nalgebra::Vector3<f64>> {
+    ata.try_inverse().map(|i| i * atb)
+}
+
+/// |y - x . k|.
+fn fit_residual(x: &[f64; 3], y: f64, k: &nalgebra::Vector3<f64>) -> f32 {
+    (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32
+}
+
+/// |L| left after a fit of its own per azimuth sector (time within the
+/// sweep): a motion error that changes within the scan.
+fn per_sector_residuals(samples: &GroundFitSamples, sectors: usize) -> Vec<f32> {
+    let mut sec: Vec<(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>)> =
+        vec![(nalgebra::Matrix3::zeros(), nalgebra::Vector3::zeros()); sectors];
+    for ((x, y), az) in samples.rows.iter().zip(&samples.azimuths_rad) {
+        add_normal_equation(&mut sec[sector_of(*az, sectors)], *x, *y);
+    }
+    let sol: Vec<Option<nalgebra::Vector3<f64>>> = sec.iter().map(solve_normal_equations).collect();
+    samples
+        .rows
+        .iter()
+        .zip(&samples.azimuths_rad)
+        .map(|((x, y), az)| match sol[sector_of(*az, sectors)] {
+            Some(k) => fit_residual(x, *y, &k),
+            None => y.abs() as f32,
+        })
+        .collect()
+}
+
+/// Median range error (metres) the whole-scan fit leaves, in 2 m range bins.
+fn print_range_error_by_range_m(samples: &GroundFitSamples, k: &nalgebra::Vector3<f64>) {
+    let mut bins: Vec<Vec<f32>> = vec![Vec::new(); 12];
+    for ((x, y), range) in samples.rows.iter().zip(&samples.ranges_m) {
+        let res = fit_residual(x, *y, k);
+        let b = ((*range / 2.0) as usize).min(11);
+        bins[b].push(res * 0.1 * *range);
+    }
+    let text: Vec<String> = bins
+        .iter_mut()
+        .enumerate()
+        .filter(|(_, v)| v.len() > 30)
+        .map(|(i, v)| format!("{}m:{:.3}", 2 * i, median(v)))
+        .collect();
+    println!("      |dr| by range: {}", text.join(" "));
+}
+
 /// Fits the trusted static ground's looming to what a rotation-rate error
 /// (about x and y) and a vertical-velocity error would read:
 /// `L = a + b e_y / s + c e_x / s`, s = -e_z; prints the spread before and after.
@@ -389,71 +551,24 @@ fn ground_fit(scan: &Scan, r: &engine::PairLooming, ground_z: f32) {
         ("l_ray_ego", &r.l_ray_ego),
         ("fused", &r.fused),
     ] {
-        let mut rows = Vec::new();
-        let mut ranges: Vec<f32> = Vec::new();
-        let mut azimuths: Vec<f32> = Vec::new();
-        for (cell, &value) in values.iter().enumerate() {
-            if r.mask[cell] != 0 || r.moving[cell] || !value.is_finite() {
-                continue;
-            }
-            let p = scan.points_m[r.image.point[cell] as usize];
-            let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            let flat = (p[0] * p[0] + p[1] * p[1]).sqrt();
-            if r.normal[cell][2] > 0.96 && (p[2] - ground_z).abs() < 0.2 + 0.01 * flat {
-                let s = -p[2] / range;
-                ranges.push(range);
-                azimuths.push(p[1].atan2(p[0]));
-                rows.push((
-                    [
-                        1.0f64,
-                        f64::from(p[1] / range / s),
-                        f64::from(p[0] / range / s),
-                    ],
-                    f64::from(value),
-                ));
-            }
-        }
+        let samples = ground_fit_samples(scan, r, values, ground_z);
+        let rows = &samples.rows;
         if rows.len() < 50 {
             continue;
         }
-        let mut ata = nalgebra::Matrix3::<f64>::zeros();
-        let mut atb = nalgebra::Vector3::<f64>::zeros();
-        for (x, y) in &rows {
-            let v = nalgebra::Vector3::from(*x);
-            ata += v * v.transpose();
-            atb += v * *y;
+        let mut normal = (
+            nalgebra::Matrix3::<f64>::zeros(),
+            nalgebra::Vector3::<f64>::zeros(),
+        );
+        for (x, y) in rows {
+            add_normal_equation(&mut normal, *x, *y);
         }
-        let Some(k) = ata.try_inverse().map(|i| i * atb) else {
+        let Some(k) = solve_normal_equations(&normal) else {
             continue;
         };
         let mut before: Vec<f32> = rows.iter().map(|(_, y)| y.abs() as f32).collect();
-        let mut after: Vec<f32> = rows
-            .iter()
-            .map(|(x, y)| (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32)
-            .collect();
-        // Per azimuth sector (time within the sweep): a motion error that
-        // changes within the scan.
-        let sectors = 8usize;
-        let mut sec: Vec<(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>)> =
-            vec![(nalgebra::Matrix3::zeros(), nalgebra::Vector3::zeros()); sectors];
-        for ((x, y), az) in rows.iter().zip(&azimuths) {
-            let v = nalgebra::Vector3::from(*x);
-            let k = sector_of(*az, sectors);
-            sec[k].0 += v * v.transpose();
-            sec[k].1 += v * *y;
-        }
-        let sol: Vec<Option<nalgebra::Vector3<f64>>> = sec
-            .iter()
-            .map(|(m, b)| m.try_inverse().map(|i| i * b))
-            .collect();
-        let mut after_sector: Vec<f32> = rows
-            .iter()
-            .zip(&azimuths)
-            .map(|((x, y), az)| match sol[sector_of(*az, sectors)] {
-                Some(k) => (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32,
-                None => y.abs() as f32,
-            })
-            .collect();
+        let mut after: Vec<f32> = rows.iter().map(|(x, y)| fit_residual(x, *y, &k)).collect();
+        let mut after_sector = per_sector_residuals(&samples, 8);
         println!(
             "      per-sector fit: median |L| -> {:.4}",
             median(&mut after_sector)
@@ -467,19 +582,7 @@ fn ground_fit(scan: &Scan, r: &engine::PairLooming, ground_z: f32) {
             median(&mut before),
             median(&mut after)
         );
-        let mut bins: Vec<Vec<f32>> = vec![Vec::new(); 12];
-        for ((x, y), range) in rows.iter().zip(&ranges) {
-            let res = (y - k[0] * x[0] - k[1] * x[1] - k[2] * x[2]).abs() as f32;
-            let b = ((*range / 2.0) as usize).min(11);
-            bins[b].push(res * 0.1 * *range);
-        }
-        let text: Vec<String> = bins
-            .iter_mut()
-            .enumerate()
-            .filter(|(_, v)| v.len() > 30)
-            .map(|(i, v)| format!("{}m:{:.3}", 2 * i, median(v)))
-            .collect();
-        println!("      |dr| by range: {}", text.join(" "));
+        print_range_error_by_range_m(&samples, &k);
     }
 }
 

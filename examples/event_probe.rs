@@ -14,16 +14,13 @@ use looming::synth::{SynthOptions, synthesize};
 /// `looming synth` stamps its drives from here.
 const START_NS: i64 = 1_700_000_000_000_000_000;
 
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
+/// Writes the scenario named by the arguments to `path`; returns its summary.
+fn synthesize_from_args(args: &[String], path: &std::path::Path) -> looming::synth::SynthSummary {
     let arg = |i: usize| args.get(i).map(|a| a.parse::<f64>().expect("a number"));
     let scenario = args.get(1).cloned().unwrap_or_else(|| "cut-in".into());
-    let dir = std::env::temp_dir().join(format!("looming-event-probe-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("drive.mcap");
-    let summary = synthesize(&SynthOptions {
+    synthesize(&SynthOptions {
         scenario,
-        output: path.clone(),
+        output: path.to_path_buf(),
         seed: std::env::var("PROBE_SEED").map_or(7, |s| s.parse().expect("a seed")),
         start_s: arg(4),
         duration_s: arg(5),
@@ -34,7 +31,44 @@ fn main() {
             ..OutputOptions::default()
         },
     })
-    .unwrap();
+    .unwrap()
+}
+
+/// One cluster near the ego path, as a bracketed line item.
+fn describe_cluster(c: &looming::events::Cluster) -> String {
+    let (az, el) = c.bearing_deg();
+    format!(
+        "[{} cells L {:.2} r {:.1} az {:.1} el {:.1} lateral {:.2} moving {}]",
+        c.cells, c.looming_per_s, c.range_m, az, el, c.lateral_offset_m, c.moving_cells
+    )
+}
+
+/// Seconds from the drive's start to `stamp_ns`.
+fn drive_time_s(stamp_ns: i64) -> f64 {
+    (stamp_ns - START_NS) as f64 * 1e-9
+}
+
+fn print_event(e: &looming::events::NearMissEvent) {
+    println!(
+        "EVENT {} {:.2}-{:.2} s pairs {} min TTC {:.2} range {:.1} az {:.1} moving {:.2} cells {}",
+        e.id,
+        drive_time_s(e.start_ns),
+        drive_time_s(e.end_ns),
+        e.hot_pairs,
+        e.min_time_to_contact_s,
+        e.peak.range_m,
+        e.peak.azimuth_deg,
+        e.moving_fraction,
+        e.max_cluster_cells
+    );
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = std::env::temp_dir().join(format!("looming-event-probe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("drive.mcap");
+    let summary = synthesize_from_args(&args, &path);
     for e in &summary.events {
         println!(
             "TRUTH {} {:.2}-{:.2} s min TTC {:.2}",
@@ -58,7 +92,7 @@ fn main() {
             let Some(looming) = compute_with_cache(&pair, &engine, &mut cache) else {
                 return;
             };
-            let t_s = (pair.current.stamp_ns - START_NS) as f64 * 1e-9;
+            let t_s = drive_time_s(pair.current.stamp_ns);
             let stamp = pair.current.stamp_ns;
             let corridor = Corridor::new(
                 pair.motion.velocity_at(stamp),
@@ -67,19 +101,7 @@ fn main() {
             );
             let clusters: Vec<String> = hot_clusters(&looming, &pair.current, &corridor, &wide, 2)
                 .iter()
-                .map(|c| {
-                    let (az, el) = c.bearing_deg();
-                    format!(
-                        "[{} cells L {:.2} r {:.1} az {:.1} el {:.1} lateral {:.2} moving {}]",
-                        c.cells,
-                        c.looming_per_s,
-                        c.range_m,
-                        az,
-                        el,
-                        c.lateral_offset_m,
-                        c.moving_cells
-                    )
-                })
+                .map(describe_cluster)
                 .collect();
             if !clusters.is_empty() {
                 let min_cells = default_min_cells(&looming.geometry);
@@ -94,18 +116,7 @@ fn main() {
     .unwrap();
     events.extend(detector.finish());
     for e in &events {
-        println!(
-            "EVENT {} {:.2}-{:.2} s pairs {} min TTC {:.2} range {:.1} az {:.1} moving {:.2} cells {}",
-            e.id,
-            (e.start_ns - START_NS) as f64 * 1e-9,
-            (e.end_ns - START_NS) as f64 * 1e-9,
-            e.hot_pairs,
-            e.min_time_to_contact_s,
-            e.peak.range_m,
-            e.peak.azimuth_deg,
-            e.moving_fraction,
-            e.max_cluster_cells
-        );
+        print_event(e);
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -104,9 +104,9 @@ fn timed(images: &[RangeImage], encode: impl Fn(&RangeImage) -> Vec<u8>) -> (Vec
     (blobs, ms)
 }
 
-fn main() {
-    let path = std::env::args().nth(1).expect("OUT.mcap");
-    let input = looming::input::InputFile::open(std::path::Path::new(&path), Default::default())
+/// Every range image in the log at `path`, in log order.
+fn read_range_images(path: &str) -> Vec<RangeImage> {
+    let input = looming::input::InputFile::open(std::path::Path::new(path), Default::default())
         .expect("a readable log");
     let channels: BTreeMap<u16, String> = input
         .catalog()
@@ -131,6 +131,12 @@ fn main() {
             looming::input::Flow::Continue(())
         })
         .expect("readable");
+    images
+}
+
+fn main() {
+    let path = std::env::args().nth(1).expect("OUT.mcap");
+    let images = read_range_images(&path);
     let Some(first) = images.first() else {
         println!("no range images in {path}");
         return;

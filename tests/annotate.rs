@@ -154,33 +154,21 @@ fn validator(schema: &str) -> jsonschema::Validator {
     jsonschema::validator_for(&schema).expect("a valid JSON Schema")
 }
 
-#[test]
-fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
-    let dir = scratch("annotate-channels");
-    let input = synth(&dir, "cut-in", &["--start", "2.6", "--duration", "3.6"]);
-    let output = dir.join("out.mcap");
-    let events_path = dir.join("events.json");
-    process(
-        &input,
-        &output,
-        &[
-            "--fields",
-            "full",
-            "--events",
-            events_path.to_str().unwrap(),
-        ],
-    );
-    // The log and the events file are ordinary files (not the temporary
-    // file's private mode).
+/// The engine's results by current log time, as `engine_results` returns them.
+type EngineResults = BTreeMap<u64, (ScanPair, PairLooming)>;
+
+/// The log and the events file are ordinary files (not the temporary file's
+/// private mode).
+fn assert_readable_by_all(written_files: &[&PathBuf]) {
     #[cfg(unix)]
-    for written in [&output, &events_path] {
+    for written in written_files {
         use std::os::unix::fs::PermissionsExt;
         let mode = std::fs::metadata(written).unwrap().permissions().mode();
         assert_eq!(mode & 0o044, 0o044, "{} mode {mode:o}", written.display());
     }
-    let contents = read_all(&std::fs::read(&output).unwrap());
-    let engine = engine_results(&input);
-    assert!(engine.len() >= 9, "{} pairs", engine.len());
+}
+
+fn assert_every_looming_channel_present(contents: &FileContents) {
     let topics: Vec<&str> = contents
         .channels
         .values()
@@ -198,50 +186,85 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
     ] {
         assert!(topics.contains(&topic), "{topic} missing: {topics:?}");
     }
+}
 
-    // Point clouds.
-    let mut moving_points = 0;
-    let mut threat_points = 0;
+/// Every point cloud on `topic`, decoded.
+fn decode_clouds(contents: &FileContents, topic: &str) -> Vec<Cloud> {
+    contents
+        .topic_messages(topic)
+        .iter()
+        .map(|m| Cloud::from(&decode(contents, m)))
+        .collect()
+}
+
+/// Points of `/looming/points` the engine found moving, and those it gave a
+/// threat level.
+#[derive(Default)]
+struct PointCounts {
+    moving: usize,
+    threat: usize,
+}
+
+/// `/looming/points` holds, point by point, the input position and what the
+/// engine computed for its pair.
+fn assert_points_hold_engine_results(
+    contents: &FileContents,
+    engine: &EngineResults,
+) -> PointCounts {
+    let mut counts = PointCounts::default();
     let points = contents.topic_messages("/looming/points");
     assert_eq!(points.len(), engine.len());
     for message in &points {
         let (pair, result) = &engine[&message.log_time];
         let scan = &pair.current;
-        let cloud = Cloud::from(&decode(&contents, message));
+        let cloud = Cloud::from(&decode(contents, message));
         assert_eq!(cloud.frame_id, scan.frame_id);
         assert_eq!(cloud.stamp_ns, scan.stamp_ns);
         assert_eq!(cloud.len(), scan.points_m.len());
         for (i, p) in scan.points_m.iter().enumerate() {
-            assert!(close_to_input(cloud.xyz(i), *p));
-            let cell = result.image.surface_cell(i);
-            let trusted = cell.filter(|&c| result.mask[c] == 0);
-            let fused = trusted.map_or(f32::NAN, |c| result.fused[c]);
-            let written = cloud.f32(i, "looming");
-            assert!(same_f32(written, fused), "point {i}: {written} vs {fused}");
-            assert_eq!(cloud.rgba(i), colour::looming(written));
-            let at = |values: &[f32]| cell.map_or(f32::NAN, |c| values[c]);
-            assert!(same_f32(cloud.f32(i, "l_lidar"), at(&result.l_lidar)));
-            assert!(same_f32(cloud.f32(i, "l_ray_ego"), at(&result.l_ray_ego)));
-            assert!(same_f32(
-                cloud.f32(i, "disagreement"),
-                at(&result.disagreement)
-            ));
-            assert!(same_f32(cloud.f32(i, "confidence"), at(&result.confidence)));
-            assert!(same_f32(cloud.f32(i, "l_ego"), result.l_ego[i]));
-            assert_eq!(cloud.u8(i, "threat"), result.point_threat[i] as u8);
-            if trusted.is_some_and(|c| result.moving[c]) {
-                moving_points += 1;
-            }
-            if result.point_threat[i] != ThreatLevel::None {
-                threat_points += 1;
-            }
+            assert_point_holds_engine_result(&cloud, i, *p, result, &mut counts);
         }
     }
-    let disagreement: Vec<Cloud> = contents
-        .topic_messages("/looming/disagreement")
-        .iter()
-        .map(|m| Cloud::from(&decode(&contents, m)))
-        .collect();
+    counts
+}
+
+/// Point `i` of `cloud`, at `input_m`, holds the engine's values for it.
+fn assert_point_holds_engine_result(
+    cloud: &Cloud,
+    i: usize,
+    input_m: [f32; 3],
+    result: &PairLooming,
+    counts: &mut PointCounts,
+) {
+    assert!(close_to_input(cloud.xyz(i), input_m));
+    let cell = result.image.surface_cell(i);
+    let trusted = cell.filter(|&c| result.mask[c] == 0);
+    let fused = trusted.map_or(f32::NAN, |c| result.fused[c]);
+    let written = cloud.f32(i, "looming");
+    assert!(same_f32(written, fused), "point {i}: {written} vs {fused}");
+    assert_eq!(cloud.rgba(i), colour::looming(written));
+    let at = |values: &[f32]| cell.map_or(f32::NAN, |c| values[c]);
+    assert!(same_f32(cloud.f32(i, "l_lidar"), at(&result.l_lidar)));
+    assert!(same_f32(cloud.f32(i, "l_ray_ego"), at(&result.l_ray_ego)));
+    assert!(same_f32(
+        cloud.f32(i, "disagreement"),
+        at(&result.disagreement)
+    ));
+    assert!(same_f32(cloud.f32(i, "confidence"), at(&result.confidence)));
+    assert!(same_f32(cloud.f32(i, "l_ego"), result.l_ego[i]));
+    assert_eq!(cloud.u8(i, "threat"), result.point_threat[i] as u8);
+    if trusted.is_some_and(|c| result.moving[c]) {
+        counts.moving += 1;
+    }
+    if result.point_threat[i] != ThreatLevel::None {
+        counts.threat += 1;
+    }
+}
+
+/// `/looming/disagreement` holds exactly the moving points, each with a
+/// significant disagreement in its colour.
+fn assert_disagreement_clouds_hold_moving_points(contents: &FileContents, moving_points: usize) {
+    let disagreement = decode_clouds(contents, "/looming/disagreement");
     let written_moving: usize = disagreement.iter().map(Cloud::len).sum();
     assert_eq!(written_moving, moving_points);
     assert!(
@@ -255,11 +278,11 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
             assert_eq!(cloud.rgba(i), colour::looming(d));
         }
     }
-    let threat: Vec<Cloud> = contents
-        .topic_messages("/looming/threat")
-        .iter()
-        .map(|m| Cloud::from(&decode(&contents, m)))
-        .collect();
+}
+
+/// `/looming/threat` holds exactly the threat points, coloured by level.
+fn assert_threat_clouds_hold_threat_points(contents: &FileContents, threat_points: usize) {
+    let threat = decode_clouds(contents, "/looming/threat");
     assert_eq!(threat.iter().map(Cloud::len).sum::<usize>(), threat_points);
     assert!(threat_points > 100);
     for cloud in &threat {
@@ -272,54 +295,69 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
             assert_eq!(cloud.rgba(i), colour::threat(expected));
         }
     }
+}
 
-    // Range images: rows are beams with the highest on top, forward at the centre.
+/// Range images: rows are beams with the highest on top, forward at the centre.
+fn assert_range_images_show_engine_values(contents: &FileContents, engine: &EngineResults) {
     for (topic, values) in [
         ("/looming/image/fused", 0),
         ("/looming/image/disagreement", 1),
     ] {
         for message in contents.topic_messages(topic) {
             let (pair, result) = &engine[&message.log_time];
-            let image = decode(&contents, message);
-            let (rows, cols) = (result.geometry.rows, result.geometry.cols);
-            assert_eq!(field(&image, "format").as_str(), Some("png"));
-            assert_eq!(stamp_ns(&image), pair.current.stamp_ns);
-            assert_eq!(
-                field(&image, "frame_id").as_str(),
-                Some(&*pair.current.frame_id)
-            );
-            let png = field(&image, "data").as_bytes().unwrap().to_vec();
-            let decoded = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
-                .expect("a PNG")
-                .to_rgb8();
-            assert_eq!(decoded.width(), cols as u32);
-            assert_eq!(decoded.height(), rows as u32);
-            let data = decoded.into_raw();
-            assert_eq!(data.len(), rows * cols * 3);
             let values = if values == 0 {
                 &result.fused
             } else {
                 &result.disagreement
             };
-            for cell in (0..rows * cols).step_by(7) {
-                let (row, col) = (cell / cols, cell % cols);
-                let at = ((rows - 1 - row) * cols + col) * 3;
-                let expected = if result.image.point[cell] == looming::engine::NO_POINT {
-                    colour::EMPTY
-                } else if result.mask[cell] != 0 {
-                    colour::MASKED
-                } else {
-                    colour::looming(values[cell])
-                };
-                assert_eq!(data[at..at + 3], expected[..3], "{topic} cell {cell}");
-            }
+            let image = decode(contents, message);
+            assert_range_image_shows(topic, &image, pair, result, values);
         }
     }
+}
 
-    // Threat zones: the equal-looming spheres of the engine.
+/// One range image on `topic` shows `values` of the engine's `result`.
+fn assert_range_image_shows(
+    topic: &str,
+    image: &DynamicMessage,
+    pair: &ScanPair,
+    result: &PairLooming,
+    values: &[f32],
+) {
+    let (rows, cols) = (result.geometry.rows, result.geometry.cols);
+    assert_eq!(field(image, "format").as_str(), Some("png"));
+    assert_eq!(stamp_ns(image), pair.current.stamp_ns);
+    assert_eq!(
+        field(image, "frame_id").as_str(),
+        Some(&*pair.current.frame_id)
+    );
+    let png = field(image, "data").as_bytes().unwrap().to_vec();
+    let decoded = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
+        .expect("a PNG")
+        .to_rgb8();
+    assert_eq!(decoded.width(), cols as u32);
+    assert_eq!(decoded.height(), rows as u32);
+    let data = decoded.into_raw();
+    assert_eq!(data.len(), rows * cols * 3);
+    for cell in (0..rows * cols).step_by(7) {
+        let (row, col) = (cell / cols, cell % cols);
+        let at = ((rows - 1 - row) * cols + col) * 3;
+        let expected = if result.image.point[cell] == looming::engine::NO_POINT {
+            colour::EMPTY
+        } else if result.mask[cell] != 0 {
+            colour::MASKED
+        } else {
+            colour::looming(values[cell])
+        };
+        assert_eq!(data[at..at + 3], expected[..3], "{topic} cell {cell}");
+    }
+}
+
+/// Threat zones: the equal-looming spheres of the engine.
+fn assert_threat_zones_are_engine_spheres(contents: &FileContents, engine: &EngineResults) {
     for message in contents.topic_messages("/looming/threat_zones") {
         let (_, result) = &engine[&message.log_time];
-        let update = decode(&contents, message);
+        let update = decode(contents, message);
         let entities = field(&update, "entities");
         let entities = entities.as_list().unwrap();
         let spheres = result.spheres.expect("the drive has a velocity");
@@ -341,9 +379,11 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
             assert!((diameter - 2.0 * sphere.radius_m).abs() < 1e-9);
         }
     }
+}
 
-    // Events: JSON valid against the declared schema, the same in the file
-    // and in the log line.
+/// Events: JSON valid against the declared schema, the same in the file
+/// and in the log line.
+fn assert_event_valid_and_same_in_file_and_log(contents: &FileContents, events_path: &Path) {
     let event_schema = contents
         .channels
         .values()
@@ -359,7 +399,7 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
         panic!("event does not match its schema: {error}");
     }
     let file: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&events_path).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(events_path).unwrap()).unwrap();
     let validate_file = validator(include_str!(
         "../schemas/looming.NearMissEvents.schema.json"
     ));
@@ -373,13 +413,45 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
     );
     let logs = contents.topic_messages("/looming/log");
     assert_eq!(logs.len(), 1);
-    let line = decode(&contents, logs[0]);
+    let line = decode(contents, logs[0]);
     assert!(
         field(&line, "message")
             .as_str()
             .unwrap()
             .starts_with("near miss #1: min time to contact")
     );
+}
+
+#[test]
+fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
+    let dir = scratch("annotate-channels");
+    let input = synth(&dir, "cut-in", &["--start", "2.6", "--duration", "3.6"]);
+    let output = dir.join("out.mcap");
+    let events_path = dir.join("events.json");
+    process(
+        &input,
+        &output,
+        &[
+            "--fields",
+            "full",
+            "--events",
+            events_path.to_str().unwrap(),
+        ],
+    );
+    assert_readable_by_all(&[&output, &events_path]);
+    let contents = read_all(&std::fs::read(&output).unwrap());
+    let engine = engine_results(&input);
+    assert!(engine.len() >= 9, "{} pairs", engine.len());
+    assert_every_looming_channel_present(&contents);
+
+    // Point clouds.
+    let counts = assert_points_hold_engine_results(&contents, &engine);
+    assert_disagreement_clouds_hold_moving_points(&contents, counts.moving);
+    assert_threat_clouds_hold_threat_points(&contents, counts.threat);
+
+    assert_range_images_show_engine_values(&contents, &engine);
+    assert_threat_zones_are_engine_spheres(&contents, &engine);
+    assert_event_valid_and_same_in_file_and_log(&contents, &events_path);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -900,13 +900,13 @@ fn helper_cloud_decodes_back() {
 // foxglove.PointCloud
 // ---------------------------------------------------------------------------
 
-#[test]
-fn foxglove_point_cloud_with_pose() {
+/// A foxglove.PointCloud of three points, the second with a NaN x, at stamp
+/// 12 s + 34 ns, posed at (1, 2, 3) turned 90 deg about z.
+fn foxglove_cloud_of_three_points_with_pose() -> foxglove::messages::PointCloud {
     use foxglove::messages::{
         PackedElementField, PointCloud, Pose as FgPose, Quaternion as FgQ, Timestamp,
         Vector3 as FgV,
     };
-    use prost::Message as _;
 
     // x y z FLOAT32, intensity UINT8 (foxglove code 1), ring UINT16 (code 3),
     // t UINT32 (code 5); stride 20 (1 byte of padding after the fields).
@@ -937,7 +937,7 @@ fn foxglove_point_cloud_with_pose() {
         data.extend_from_slice(&t.to_le_bytes());
         data.push(0); // padding to the stride
     }
-    let cloud = PointCloud {
+    PointCloud {
         timestamp: Some(Timestamp::new(12, 34)),
         frame_id: "/base_link".into(),
         pose: Some(FgPose {
@@ -956,7 +956,40 @@ fn foxglove_point_cloud_with_pose() {
         point_stride: 20,
         fields,
         data: data.into(),
-    };
+    }
+}
+
+/// Without a pose the sensor pose is the identity.
+fn assert_no_pose_gives_identity_sensor_pose(cloud: &foxglove::messages::PointCloud) {
+    let mut no_pose = cloud.clone();
+    no_pose.pose = None;
+    let scan = looming::decode::scan_from_foxglove(&no_pose, &DecodeLimits::default()).unwrap();
+    assert_eq!(scan.sensor_pose, nalgebra::Isometry3::identity());
+}
+
+/// A non-finite orientation is refused.
+fn assert_non_finite_orientation_refused(cloud: &foxglove::messages::PointCloud) {
+    let mut bad = cloud.clone();
+    if let Some(pose) = bad.pose.as_mut() {
+        pose.orientation = Some(foxglove::messages::Quaternion {
+            x: f64::NAN,
+            y: 0.0,
+            z: 0.0,
+            w: 1.0,
+        });
+    }
+    let err = looming::decode::scan_from_foxglove(&bad, &DecodeLimits::default()).unwrap_err();
+    assert!(
+        matches!(err, DecodeError::InvalidQuaternion { .. }),
+        "{err}"
+    );
+}
+
+#[test]
+fn foxglove_point_cloud_with_pose() {
+    use prost::Message as _;
+
+    let cloud = foxglove_cloud_of_three_points_with_pose();
     let bytes = cloud.encode_to_vec();
     let Decoded::Scan(scan) = decode(
         MessageKind::FoxglovePointCloud,
@@ -981,27 +1014,8 @@ fn foxglove_point_cloud_with_pose() {
     let p = scan.sensor_pose * nalgebra::Point3::new(1.0, 0.0, 0.0);
     assert!((p.coords - V3::new(1.0, 3.0, 3.0)).norm() < 1e-12, "{p}");
 
-    // Without a pose the sensor pose is the identity.
-    let mut no_pose = cloud.clone();
-    no_pose.pose = None;
-    let scan = looming::decode::scan_from_foxglove(&no_pose, &DecodeLimits::default()).unwrap();
-    assert_eq!(scan.sensor_pose, nalgebra::Isometry3::identity());
-
-    // A non-finite orientation is refused.
-    let mut bad = cloud.clone();
-    if let Some(pose) = bad.pose.as_mut() {
-        pose.orientation = Some(FgQ {
-            x: f64::NAN,
-            y: 0.0,
-            z: 0.0,
-            w: 1.0,
-        });
-    }
-    let err = looming::decode::scan_from_foxglove(&bad, &DecodeLimits::default()).unwrap_err();
-    assert!(
-        matches!(err, DecodeError::InvalidQuaternion { .. }),
-        "{err}"
-    );
+    assert_no_pose_gives_identity_sensor_pose(&cloud);
+    assert_non_finite_orientation_refused(&cloud);
 }
 
 #[test]

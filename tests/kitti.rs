@@ -257,11 +257,11 @@ fn engine_results(path: &Path) -> BTreeMap<i64, (Scan, PairLooming)> {
     results
 }
 
-#[test]
-fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run() {
-    let dir = scratch("kitti-round-trip");
+/// A 32 x 512 cut-in drive with 100 Hz motion, 2.5 s in for 4 s, at
+/// `dir/synth.mcap`.
+fn synthesize_cut_in_at_100_hz(dir: &Path) -> PathBuf {
     let synth = dir.join("synth.mcap");
-    let scenario = hundred_hertz_scenario(&dir, "cut-in");
+    let scenario = hundred_hertz_scenario(dir, "cut-in");
     run(&[
         "synth",
         "--scenario",
@@ -279,41 +279,46 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
         "--force",
         "-q",
     ]);
-    let drive = read_drive(&synth);
-    assert!(drive.scans.len() >= 14);
-    let drive_dir = write_kitti(&drive, &dir.join("kitti"));
-    let imported = dir.join("imported.mcap");
-    // The synthetic sensor turns clockwise (KITTI's: counter-clockwise).
-    run(&[
-        "import-kitti",
-        drive_dir.to_str().unwrap(),
-        "-o",
-        imported.to_str().unwrap(),
-        "--sweep",
-        "clockwise",
-    ]);
+    synth
+}
 
-    // The imported log carries what `process` needs, found automatically.
+/// The imported log carries what `process` needs, found automatically.
+fn assert_inspect_finds_kitti_topics(imported: &Path) {
     let inspect = looming(&["inspect", imported.to_str().unwrap(), "--json"]);
     let report: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
     let detected = report.to_string();
     for topic in ["/velodyne_points", "/oxts/imu", "/oxts/twist", "/tf_static"] {
         assert!(detected.contains(topic), "{topic} in {detected}");
     }
+}
 
-    // Round trip: the same looming per cell as the direct run.
-    let direct = engine_results(&synth);
-    let via_kitti = engine_results(&imported);
-    assert_eq!(direct.len(), via_kitti.len());
-    // NaN on both sides matches; NaN on one side is an infinite difference.
-    let gap = |x: f32, y: f32| match (x.is_finite(), y.is_finite()) {
+/// How far the engine's results via KITTI are from the direct run's.
+#[derive(Default)]
+struct RoundTripGaps {
+    /// Cells with a finite fused looming in the direct run.
+    compared: usize,
+    differing_mask: usize,
+    worst_fused_per_s: f32,
+    worst_lidar_per_s: f32,
+}
+
+/// NaN on both sides matches; NaN on one side is an infinite difference.
+fn looming_gap_per_s(x: f32, y: f32) -> f32 {
+    match (x.is_finite(), y.is_finite()) {
         (true, true) => (x - y).abs(),
         (false, false) => 0.0,
         _ => f32::INFINITY,
-    };
-    let (mut compared, mut differing_mask) = (0usize, 0usize);
-    let (mut worst_fused, mut worst_lidar) = (0f32, 0f32);
-    for (stamp, (scan, a)) in &direct {
+    }
+}
+
+/// Compares the two runs pair by pair (same points, rings and image size
+/// asserted per pair) and cell by cell.
+fn round_trip_gaps(
+    direct: &BTreeMap<i64, (Scan, PairLooming)>,
+    via_kitti: &BTreeMap<i64, (Scan, PairLooming)>,
+) -> RoundTripGaps {
+    let mut gaps = RoundTripGaps::default();
+    for (stamp, (scan, a)) in direct {
         let (kitti_scan, b) = &via_kitti[stamp];
         assert_eq!(kitti_scan.points_m.len(), scan.points_m.len());
         assert_eq!(
@@ -325,12 +330,30 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
             (b.geometry.rows, b.geometry.cols)
         );
         for cell in 0..a.geometry.cells() {
-            differing_mask += usize::from(a.mask[cell] != b.mask[cell]);
-            compared += usize::from(a.fused[cell].is_finite());
-            worst_fused = worst_fused.max(gap(a.fused[cell], b.fused[cell]));
-            worst_lidar = worst_lidar.max(gap(a.l_lidar[cell], b.l_lidar[cell]));
+            gaps.differing_mask += usize::from(a.mask[cell] != b.mask[cell]);
+            gaps.compared += usize::from(a.fused[cell].is_finite());
+            gaps.worst_fused_per_s = gaps
+                .worst_fused_per_s
+                .max(looming_gap_per_s(a.fused[cell], b.fused[cell]));
+            gaps.worst_lidar_per_s = gaps
+                .worst_lidar_per_s
+                .max(looming_gap_per_s(a.l_lidar[cell], b.l_lidar[cell]));
         }
     }
+    gaps
+}
+
+/// Round trip: the same looming per cell as the direct run.
+fn assert_same_looming_as_direct_run(synth: &Path, imported: &Path) {
+    let direct = engine_results(synth);
+    let via_kitti = engine_results(imported);
+    assert_eq!(direct.len(), via_kitti.len());
+    let RoundTripGaps {
+        compared,
+        differing_mask,
+        worst_fused_per_s: worst_fused,
+        worst_lidar_per_s: worst_lidar,
+    } = round_trip_gaps(&direct, &via_kitti);
     let cells = direct.len() * direct.values().next().unwrap().1.geometry.cells();
     assert!(compared > cells / 2, "{compared} of {cells} cells compared");
     eprintln!(
@@ -349,8 +372,11 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
         differing_mask, 0,
         "{differing_mask} of {cells} masks differ"
     );
+}
 
-    // process, events, eval against the scenario's truth, render.
+/// `process` of the imported log finds the one planted near miss; returns
+/// the processed log.
+fn process_finds_the_cut_in(dir: &Path, imported: &Path) -> PathBuf {
     let processed = dir.join("imported-out.mcap");
     let events = dir.join("events.json");
     run(&[
@@ -365,6 +391,12 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
     let events: looming::events::EventsFile =
         serde_json::from_slice(&std::fs::read(&events).unwrap()).unwrap();
     assert_eq!(events.events.len(), 1, "the cut-in near miss");
+    processed
+}
+
+/// `eval` of the imported log against the scenario's truth matches the
+/// direct evaluation.
+fn assert_eval_matches_direct(dir: &Path, imported: &Path, synth: &Path) {
     let eval_json = dir.join("eval.json");
     run(&[
         "eval",
@@ -376,7 +408,7 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
     ]);
     let eval: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&eval_json).unwrap()).unwrap();
-    let direct_eval = looming::commands::eval::evaluate(&synth, &EngineConfig::default()).unwrap();
+    let direct_eval = looming::commands::eval::evaluate(synth, &EngineConfig::default()).unwrap();
     assert_eq!(eval["pairs"].as_u64(), Some(direct_eval.pairs));
     let p90 = |q: &str, c: &str| eval["errors"][q][c]["p90_abs"].as_f64().unwrap();
     let direct_p90 = direct_eval.errors["fused"]["all_unmasked"].p90_abs;
@@ -385,6 +417,9 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
         "fused p90 {} via KITTI against {direct_p90} direct",
         p90("fused", "all_unmasked")
     );
+}
+
+fn assert_render_writes_a_png(dir: &Path, processed: &Path) {
     let png = dir.join("fused.png");
     run(&[
         "render",
@@ -397,6 +432,32 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
         png.to_str().unwrap(),
     ]);
     assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+}
+
+#[test]
+fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run() {
+    let dir = scratch("kitti-round-trip");
+    let synth = synthesize_cut_in_at_100_hz(&dir);
+    let drive = read_drive(&synth);
+    assert!(drive.scans.len() >= 14);
+    let drive_dir = write_kitti(&drive, &dir.join("kitti"));
+    let imported = dir.join("imported.mcap");
+    // The synthetic sensor turns clockwise (KITTI's: counter-clockwise).
+    run(&[
+        "import-kitti",
+        drive_dir.to_str().unwrap(),
+        "-o",
+        imported.to_str().unwrap(),
+        "--sweep",
+        "clockwise",
+    ]);
+    assert_inspect_finds_kitti_topics(&imported);
+    assert_same_looming_as_direct_run(&synth, &imported);
+
+    // process, events, eval against the scenario's truth, render.
+    let processed = process_finds_the_cut_in(&dir, &imported);
+    assert_eval_matches_direct(&dir, &imported, &synth);
+    assert_render_writes_a_png(&dir, &processed);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

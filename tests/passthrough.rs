@@ -273,6 +273,93 @@ fn assert_summary_offsets(bytes: &[u8]) {
     );
 }
 
+/// Chunk records and their message indexes, byte for byte, in order; our
+/// channels in chunks of their own. Returns the input's channel ids.
+fn assert_input_chunks_copied_byte_for_byte(
+    name: &str,
+    input: &[u8],
+    output: &[u8],
+    summary: &serde_json::Value,
+) -> Vec<u16> {
+    let in_chunks = stored_chunks(input);
+    let in_ids: Vec<u16> = read_all(input).channels.keys().copied().collect();
+    let (copied, ours): (Vec<StoredChunk>, Vec<StoredChunk>) = stored_chunks(output)
+        .into_iter()
+        .partition(|c| c.channels.iter().all(|id| in_ids.contains(id)));
+    assert!(copied == in_chunks, "{name}: input chunks copied unchanged");
+    assert!(
+        !ours.is_empty(),
+        "{name}: our channels in chunks of their own"
+    );
+    assert!(
+        ours.iter()
+            .all(|c| c.channels.iter().all(|id| !in_ids.contains(id)))
+    );
+    let report = &summary["input_report"];
+    assert_eq!(report["chunks_copied"], in_chunks.len() as u64, "{name}");
+    let decompressed = report["chunks_decompressed"].as_u64().unwrap();
+    assert!(
+        decompressed > 0 && decompressed < in_chunks.len() as u64,
+        "{name}: only chunks with decoded topics decompressed ({decompressed} of {})",
+        in_chunks.len()
+    );
+    in_ids
+}
+
+/// Linear readers with every CRC checked; input records unchanged. Returns
+/// the output's messages in file order.
+fn assert_input_records_unchanged(
+    name: &str,
+    input: &[u8],
+    output: &[u8],
+    in_ids: &[u16],
+) -> Vec<RawMessage> {
+    validate_crcs(output);
+    let original = read_all(input);
+    let contents = read_all(output);
+    assert_all_input_messages_copied(&original, &contents);
+    assert_eq!(contents.attachments, original.attachments, "{name}");
+    for metadata in &original.metadata {
+        assert!(
+            contents.metadata.contains(metadata),
+            "{name}: {}",
+            metadata.name
+        );
+    }
+    assert!(contents.metadata.iter().any(|m| m.name == "looming"));
+    let streamed = stream_messages(output);
+    let input_streamed: Vec<RawMessage> = streamed
+        .iter()
+        .filter(|m| in_ids.contains(&m.channel_id))
+        .cloned()
+        .collect();
+    assert!(
+        input_streamed == stream_messages(input),
+        "{name}: input messages in their file order, unchanged"
+    );
+    streamed
+}
+
+/// The output's summary holds every input channel and schema unchanged.
+fn assert_input_channels_and_schemas_in_summary(name: &str, input: &[u8], output: &[u8]) {
+    let in_summary = mcap::Summary::read(input).unwrap().unwrap();
+    let out_summary = mcap::Summary::read(output).unwrap().unwrap();
+    for (id, channel) in &in_summary.channels {
+        assert_eq!(
+            out_summary.channels.get(id),
+            Some(channel),
+            "{name}: channel {id}"
+        );
+    }
+    for (id, schema) in &in_summary.schemas {
+        assert_eq!(
+            out_summary.schemas.get(id),
+            Some(schema),
+            "{name}: schema {id}"
+        );
+    }
+}
+
 #[test]
 fn input_chunks_are_copied_byte_for_byte_and_read_back_in_log_time_order() {
     let dir = scratch("passthrough");
@@ -285,70 +372,9 @@ fn input_chunks_are_copied_byte_for_byte_and_read_back_in_log_time_order() {
         let output = std::fs::read(&out_path).unwrap();
         assert_eq!(summary["write"]["mode"], "pass_through", "{name}");
 
-        // Chunk records and their message indexes, byte for byte, in order.
-        let in_chunks = stored_chunks(&input);
-        let in_ids: Vec<u16> = read_all(&input).channels.keys().copied().collect();
-        let (copied, ours): (Vec<StoredChunk>, Vec<StoredChunk>) = stored_chunks(&output)
-            .into_iter()
-            .partition(|c| c.channels.iter().all(|id| in_ids.contains(id)));
-        assert!(copied == in_chunks, "{name}: input chunks copied unchanged");
-        assert!(
-            !ours.is_empty(),
-            "{name}: our channels in chunks of their own"
-        );
-        assert!(
-            ours.iter()
-                .all(|c| c.channels.iter().all(|id| !in_ids.contains(id)))
-        );
-        let report = &summary["input_report"];
-        assert_eq!(report["chunks_copied"], in_chunks.len() as u64, "{name}");
-        let decompressed = report["chunks_decompressed"].as_u64().unwrap();
-        assert!(
-            decompressed > 0 && decompressed < in_chunks.len() as u64,
-            "{name}: only chunks with decoded topics decompressed ({decompressed} of {})",
-            in_chunks.len()
-        );
-
-        // Linear readers with every CRC checked; input records unchanged.
-        validate_crcs(&output);
-        let original = read_all(&input);
-        let contents = read_all(&output);
-        assert_all_input_messages_copied(&original, &contents);
-        assert_eq!(contents.attachments, original.attachments, "{name}");
-        for metadata in &original.metadata {
-            assert!(
-                contents.metadata.contains(metadata),
-                "{name}: {}",
-                metadata.name
-            );
-        }
-        assert!(contents.metadata.iter().any(|m| m.name == "looming"));
-        let streamed = stream_messages(&output);
-        let input_streamed: Vec<RawMessage> = streamed
-            .iter()
-            .filter(|m| in_ids.contains(&m.channel_id))
-            .cloned()
-            .collect();
-        assert!(
-            input_streamed == stream_messages(&input),
-            "{name}: input messages in their file order, unchanged"
-        );
-        let in_summary = mcap::Summary::read(&input).unwrap().unwrap();
-        let out_summary = mcap::Summary::read(&output).unwrap().unwrap();
-        for (id, channel) in &in_summary.channels {
-            assert_eq!(
-                out_summary.channels.get(id),
-                Some(channel),
-                "{name}: channel {id}"
-            );
-        }
-        for (id, schema) in &in_summary.schemas {
-            assert_eq!(
-                out_summary.schemas.get(id),
-                Some(schema),
-                "{name}: schema {id}"
-            );
-        }
+        let in_ids = assert_input_chunks_copied_byte_for_byte(name, &input, &output, &summary);
+        let streamed = assert_input_records_unchanged(name, &input, &output, &in_ids);
+        assert_input_channels_and_schemas_in_summary(name, &input, &output);
         assert_statistics(&output, &streamed);
         assert_summary_offsets(&output);
 

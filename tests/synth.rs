@@ -337,7 +337,8 @@ fn planted_near_misses_are_in_the_truth() {
 use looming::ros::msgs::PointCloud2;
 use looming::synth::scene::{CloudLayout, LAYOUT_NAMES, Realism};
 use looming::synth::{CloudShape, Slot};
-use looming::truth::NO_RETURN_SURFACE;
+use looming::truth::{NO_RETURN_SURFACE, PointTruth};
+use std::path::{Path, PathBuf};
 
 /// Value of field `name` of point `index` (little-endian), as f64.
 fn field_value(cloud: &PointCloud2<'_>, name: &str, index: usize) -> f64 {
@@ -380,127 +381,197 @@ fn expected_fields(layout: &str) -> Vec<(&str, u8)> {
     fields
 }
 
+/// A 0.3 s cut-in drive of 16 beams x 128 columns in cloud layout `layout`.
+fn synthesize_16_by_128_in_layout(layout: &str) -> PathBuf {
+    let dir = scratch(&format!("synth-layout-{}", layout.replace(':', "_")));
+    synth(
+        &dir,
+        "cut-in",
+        &[
+            "--beams",
+            "16",
+            "--columns",
+            "128",
+            "--duration",
+            "0.3",
+            "--layout",
+            layout,
+        ],
+    )
+}
+
+/// `inspect` finds the lidar topic whatever the layout.
+fn assert_inspect_detects_the_lidar(layout: &str, path: &Path) {
+    let inspect = looming(&["inspect", path.to_str().unwrap(), "--json"]);
+    assert!(inspect.status.success(), "{layout}: {}", stderr(&inspect));
+    let report: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    assert_eq!(
+        report["detected"]["lidar"],
+        serde_json::json!(["/lidar/points"]),
+        "{layout}"
+    );
+}
+
+/// The cloud's fields, row step and shape are the layout's, and the truth
+/// has one entry per cloud point.
+fn assert_cloud_shape_of_layout(
+    layout: &str,
+    cloud: &PointCloud2<'_>,
+    truth_cloud: &PointCloud2<'_>,
+    (beams, columns): (usize, usize),
+) {
+    let fields: Vec<(&str, u8)> = cloud
+        .fields
+        .iter()
+        .map(|f| (f.name.as_str(), f.datatype))
+        .collect();
+    assert_eq!(fields, expected_fields(layout), "{layout}");
+    assert_eq!(cloud.row_step, cloud.width * cloud.point_step, "{layout}");
+    assert_eq!(
+        (truth_cloud.width, truth_cloud.height),
+        (cloud.width, cloud.height),
+        "{layout}: the truth has one entry per cloud point"
+    );
+    if layout == "organized" {
+        assert_eq!((cloud.height, cloud.width), (beams as u32, columns as u32));
+        assert_eq!(cloud.point_step, 48);
+    } else {
+        assert_eq!(cloud.height, 1, "{layout}");
+    }
+}
+
+/// Dense layouts keep a NaN pixel for every missing return (sky), the others
+/// only the returns.
+fn assert_nan_pixels_of_layout(
+    layout: &str,
+    cloud: &PointCloud2<'_>,
+    (pixels, returns): (usize, usize),
+    nan: &[usize],
+    (beams, columns): (usize, usize),
+) {
+    let dense = matches!(layout, "organized" | "firing-order");
+    if dense {
+        assert_eq!(pixels, beams * columns, "{layout}");
+        assert_eq!(nan.len(), pixels - returns, "{layout}");
+        assert!(!nan.is_empty() && !cloud.is_dense, "{layout}: sky pixels");
+    } else {
+        assert_eq!((pixels, nan.len()), (returns, 0), "{layout}");
+    }
+}
+
+/// The truth of a NaN pixel is no surface and no looming.
+fn assert_nan_pixels_have_no_surface(layout: &str, truth: &[PointTruth], nan: &[usize]) {
+    for &i in nan {
+        assert_eq!(truth[i].surface, NO_RETURN_SURFACE, "{layout}");
+        assert!(truth[i].ray_looming.is_nan());
+    }
+}
+
+/// The decoder reads every return of the layout, its rings and times where
+/// the layout has them, and each point finds its truth by index.
+fn assert_decoder_reads_layout(
+    layout: &str,
+    cloud: &PointCloud2<'_>,
+    truth_cloud: &PointCloud2<'_>,
+    truth: &[PointTruth],
+    returns: usize,
+    nan: &[usize],
+) {
+    let decoded = looming::decode::scan_from_pointcloud2(cloud, &Default::default()).unwrap();
+    assert_eq!(decoded.points_m.len(), returns, "{layout}");
+    assert_eq!(decoded.skipped_invalid_points as usize, nan.len());
+    // The decoder reads a ring field under its common names
+    // (ring, channel, laser_id, line, laser_number).
+    assert_eq!(
+        decoded.ring.is_some(),
+        matches!(layout, "ring-time" | "organized") || layout.starts_with("ring-field"),
+        "{layout}: the decoder reads the ring field"
+    );
+    assert_eq!(
+        decoded.time_offset_s.is_some(),
+        layout == "organized" || layout.starts_with("ring-"),
+        "{layout}"
+    );
+    // Each decoded point finds its truth by index: the same return.
+    for (k, p) in decoded.points_m.iter().enumerate() {
+        let t = truth[decoded.source_index[k] as usize];
+        let r = p.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt();
+        let range_m = field_range(truth_cloud, decoded.source_index[k] as usize);
+        assert!(
+            t.surface != NO_RETURN_SURFACE && (r - range_m).abs() < 0.2,
+            "{layout}: point {k} at {r} m, truth {range_m} m"
+        );
+    }
+}
+
+/// The organized layout: ring and time per pixel from its row and column,
+/// and row 0 is the top beam.
+fn assert_organized_rows_and_times(
+    cloud: &PointCloud2<'_>,
+    nan: &[usize],
+    (beams, columns): (usize, usize),
+) {
+    for row in 0..beams {
+        for column in [0, 37, 127] {
+            let i = row * columns + column;
+            assert_eq!(field_value(cloud, "ring", i), row as f64);
+            let t_ns = (column as f64 * 1e8 / columns as f64).round();
+            assert_eq!(field_value(cloud, "t", i), t_ns);
+        }
+    }
+    // Row 0 is the top beam: its returns are higher up than row 15's.
+    let mean_elevation = |row: usize| {
+        let e: Vec<f64> = (0..columns)
+            .map(|c| row * columns + c)
+            .filter(|i| !nan.contains(i))
+            .map(|i| {
+                let [x, y, z] = ["x", "y", "z"].map(|n| field_value(cloud, n, i));
+                z.atan2(x.hypot(y))
+            })
+            .collect();
+        e.iter().sum::<f64>() / e.len() as f64
+    };
+    assert!(mean_elevation(0) > mean_elevation(beams - 1) + 0.3);
+}
+
+/// One scan of the layout: its cloud, its truth cloud and its truth summary
+/// read back consistently.
+fn assert_layout_scan_reads_back(
+    layout: &str,
+    (cloud, truth, scan): (&RawMessage, &RawMessage, &RawMessage),
+    beams_columns: (usize, usize),
+) {
+    let cloud = PointCloud2::decode_cdr(&cloud.data).unwrap();
+    let truth_cloud = PointCloud2::decode_cdr(&truth.data).unwrap();
+    let scan: serde_json::Value = serde_json::from_slice(&scan.data).unwrap();
+    let returns = scan["points"].as_u64().unwrap() as usize;
+    let pixels = (cloud.width * cloud.height) as usize;
+    assert_cloud_shape_of_layout(layout, &cloud, &truth_cloud, beams_columns);
+    let nan: Vec<usize> = (0..pixels)
+        .filter(|&i| !field_value(&cloud, "x", i).is_finite())
+        .collect();
+    assert_nan_pixels_of_layout(layout, &cloud, (pixels, returns), &nan, beams_columns);
+    let (_, truth) = looming::truth::decode_points(&truth.data).unwrap();
+    assert_nan_pixels_have_no_surface(layout, &truth, &nan);
+    assert_decoder_reads_layout(layout, &cloud, &truth_cloud, &truth, returns, &nan);
+    if layout == "organized" {
+        assert_organized_rows_and_times(&cloud, &nan, beams_columns);
+    }
+}
+
 #[test]
 fn every_layout_is_read_back_by_inspect_and_the_decoder() {
     let (beams, columns) = (16usize, 128usize);
     for layout in LAYOUT_NAMES {
-        let dir = scratch(&format!("synth-layout-{}", layout.replace(':', "_")));
-        let path = synth(
-            &dir,
-            "cut-in",
-            &[
-                "--beams",
-                "16",
-                "--columns",
-                "128",
-                "--duration",
-                "0.3",
-                "--layout",
-                layout,
-            ],
-        );
-        let inspect = looming(&["inspect", path.to_str().unwrap(), "--json"]);
-        assert!(inspect.status.success(), "{layout}: {}", stderr(&inspect));
-        let report: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
-        assert_eq!(
-            report["detected"]["lidar"],
-            serde_json::json!(["/lidar/points"]),
-            "{layout}"
-        );
+        let path = synthesize_16_by_128_in_layout(layout);
+        assert_inspect_detects_the_lidar(layout, &path);
         let contents = read_all(&std::fs::read(&path).unwrap());
         let clouds = contents.topic_messages("/lidar/points");
         let truths = contents.topic_messages("/truth/points");
         let scans = contents.topic_messages("/truth/scan");
         assert_eq!(clouds.len(), 3, "{layout}");
-        let dense = matches!(*layout, "organized" | "firing-order");
         for ((cloud, truth), scan) in clouds.iter().zip(&truths).zip(&scans) {
-            let cloud = PointCloud2::decode_cdr(&cloud.data).unwrap();
-            let truth_cloud = PointCloud2::decode_cdr(&truth.data).unwrap();
-            let scan: serde_json::Value = serde_json::from_slice(&scan.data).unwrap();
-            let returns = scan["points"].as_u64().unwrap() as usize;
-            let fields: Vec<(&str, u8)> = cloud
-                .fields
-                .iter()
-                .map(|f| (f.name.as_str(), f.datatype))
-                .collect();
-            assert_eq!(fields, expected_fields(layout), "{layout}");
-            let pixels = (cloud.width * cloud.height) as usize;
-            assert_eq!(cloud.row_step, cloud.width * cloud.point_step, "{layout}");
-            assert_eq!(
-                (truth_cloud.width, truth_cloud.height),
-                (cloud.width, cloud.height),
-                "{layout}: the truth has one entry per cloud point"
-            );
-            if *layout == "organized" {
-                assert_eq!((cloud.height, cloud.width), (beams as u32, columns as u32));
-                assert_eq!(cloud.point_step, 48);
-            } else {
-                assert_eq!(cloud.height, 1, "{layout}");
-            }
-            let nan: Vec<usize> = (0..pixels)
-                .filter(|&i| !field_value(&cloud, "x", i).is_finite())
-                .collect();
-            if dense {
-                assert_eq!(pixels, beams * columns, "{layout}");
-                assert_eq!(nan.len(), pixels - returns, "{layout}");
-                assert!(!nan.is_empty() && !cloud.is_dense, "{layout}: sky pixels");
-            } else {
-                assert_eq!((pixels, nan.len()), (returns, 0), "{layout}");
-            }
-            let (_, truth) = looming::truth::decode_points(&truth.data).unwrap();
-            for &i in &nan {
-                assert_eq!(truth[i].surface, NO_RETURN_SURFACE, "{layout}");
-                assert!(truth[i].ray_looming.is_nan());
-            }
-            let decoded =
-                looming::decode::scan_from_pointcloud2(&cloud, &Default::default()).unwrap();
-            assert_eq!(decoded.points_m.len(), returns, "{layout}");
-            assert_eq!(decoded.skipped_invalid_points as usize, nan.len());
-            // The decoder reads a ring field under its common names
-            // (ring, channel, laser_id, line, laser_number).
-            assert_eq!(
-                decoded.ring.is_some(),
-                matches!(*layout, "ring-time" | "organized") || layout.starts_with("ring-field"),
-                "{layout}: the decoder reads the ring field"
-            );
-            assert_eq!(
-                decoded.time_offset_s.is_some(),
-                *layout == "organized" || layout.starts_with("ring-"),
-                "{layout}"
-            );
-            // Each decoded point finds its truth by index: the same return.
-            for (k, p) in decoded.points_m.iter().enumerate() {
-                let t = truth[decoded.source_index[k] as usize];
-                let r = p.iter().map(|c| f64::from(*c).powi(2)).sum::<f64>().sqrt();
-                let range_m = field_range(&truth_cloud, decoded.source_index[k] as usize);
-                assert!(
-                    t.surface != NO_RETURN_SURFACE && (r - range_m).abs() < 0.2,
-                    "{layout}: point {k} at {r} m, truth {range_m} m"
-                );
-            }
-            if *layout == "organized" {
-                for row in 0..beams {
-                    for column in [0, 37, 127] {
-                        let i = row * columns + column;
-                        assert_eq!(field_value(&cloud, "ring", i), row as f64);
-                        let t_ns = (column as f64 * 1e8 / columns as f64).round();
-                        assert_eq!(field_value(&cloud, "t", i), t_ns);
-                    }
-                }
-                // Row 0 is the top beam: its returns are higher up than row 15's.
-                let mean_elevation = |row: usize| {
-                    let e: Vec<f64> = (0..columns)
-                        .map(|c| row * columns + c)
-                        .filter(|i| !nan.contains(i))
-                        .map(|i| {
-                            let [x, y, z] = ["x", "y", "z"].map(|n| field_value(&cloud, n, i));
-                            z.atan2(x.hypot(y))
-                        })
-                        .collect();
-                    e.iter().sum::<f64>() / e.len() as f64
-                };
-                assert!(mean_elevation(0) > mean_elevation(beams - 1) + 0.3);
-            }
+            assert_layout_scan_reads_back(layout, (cloud, truth, scan), (beams, columns));
         }
     }
 }
