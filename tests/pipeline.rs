@@ -690,7 +690,7 @@ fn eval_and_render_pair_scans_as_process_does() {
     // ... and with --strict, the bad message stops it as it stops process.
     args.push("--strict");
     let run = looming(&args);
-    assert!(!run.status.success());
+    assert_eq!(run.status.code(), Some(3));
     assert!(stderr(&run).contains("topic"), "{}", stderr(&run));
 }
 

@@ -56,6 +56,7 @@ pub(crate) enum Command {
     ///
     /// FILE must carry /truth/points (a `looming synth` drive, processed or
     /// not), or --truth names a log that does.
+    #[command(after_help = EXIT_CODES)]
     Eval(EvalArgs),
     /// List the near-miss events of an annotated log (its /looming/events),
     /// ranked by minimum time to contact.
@@ -73,7 +74,7 @@ pub(crate) enum Command {
     ImportKitti(ImportKittiArgs),
     /// Draw a scan pair's looming as a PNG: the range image (rows = beams,
     /// forward at the centre) or, with --view top, the cloud from above.
-    #[command(after_help = SYNTH_EXIT_CODES)]
+    #[command(after_help = EXIT_CODES)]
     Render(RenderArgs),
 }
 

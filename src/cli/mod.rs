@@ -98,7 +98,11 @@ fn eval(args: EvalArgs) -> Result<(), Failure> {
         &config,
         args.truth.as_deref(),
         &scans,
-    )?;
+    )
+    .map_err(|error| {
+        let strict = matches!(error, looming::commands::eval::EvalError::Strict(_));
+        Failure::with_code(error, if strict { 3 } else { 1 })
+    })?;
     print!("{}", report.to_text());
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
@@ -110,7 +114,13 @@ fn eval(args: EvalArgs) -> Result<(), Failure> {
 fn render(args: RenderArgs) -> Result<(), Failure> {
     let options = resolve::render_options(&args)?;
     let summary = looming::commands::render::render(&options).map_err(|error| {
-        let code = if error.is_usage() { 2 } else { 1 };
+        let code = if error.is_usage() {
+            2
+        } else if error.is_strict() {
+            3
+        } else {
+            1
+        };
         Failure::with_code(error, code)
     })?;
     eprintln!(

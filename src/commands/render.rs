@@ -143,6 +143,12 @@ pub enum RenderError {
 }
 
 impl RenderError {
+    /// `strict` and the log had a bad message or was truncated (exit code 3
+    /// by the CLI's convention, as for `process`).
+    pub fn is_strict(&self) -> bool {
+        matches!(self, RenderError::Replay(ReplayError::Strict(_)))
+    }
+
     /// A usage error (exit code 2 by the CLI's convention): a bad argument, a
     /// pair that does not exist, an unusable topic choice, an output that
     /// exists or is the input.
