@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand};
 
 use super::choices::{FieldSet, OutputCompression, RenderChannel, RenderView, SweepDirection};
 
-use super::resolve::parse_threat_ttc;
+use super::resolve::{parse_shard, parse_threat_ttc};
 
 pub(crate) const EXIT_CODES: &str = "\
 Exit codes:
@@ -17,6 +17,13 @@ Exit codes:
   2  usage: bad arguments, unknown or ambiguous topic, output exists (see --force)
      or is the input, input already processed
   3  --strict and the input had a bad message, a bad chunk CRC or was truncated";
+
+pub(crate) const BATCH_EXIT_CODES: &str = "\
+Exit codes:
+  0  every log processed, or skipped by policy (no LiDAR topic)
+  1  at least one log failed (fleet.json says which and why), or OUT_DIR could
+     not be written
+  2  usage: bad arguments";
 
 pub(crate) const SYNTH_EXIT_CODES: &str = "\
 Exit codes:
@@ -41,6 +48,13 @@ pub(crate) enum Command {
     /// Process a log: copy every record and add the /looming/* channels.
     #[command(after_help = EXIT_CODES)]
     Process(ProcessArgs),
+    /// Process a fleet of logs: every *.mcap below a folder, single files or
+    /// a manifest (.txt, one path per line), into OUT_DIR/logs/, with
+    /// OUT_DIR/fleet.json and the near misses of every log ranked in
+    /// OUT_DIR/near_misses.jsonl and .csv. A log whose output is complete and
+    /// made from the same input and options is not run again.
+    #[command(after_help = BATCH_EXIT_CODES)]
+    Batch(BatchArgs),
     /// Show a log's channels, schemas, counts, rates, time span and the topics
     /// `process` would use.
     #[command(after_help = EXIT_CODES)]
@@ -213,9 +227,6 @@ pub(crate) struct ProcessArgs {
     pub(crate) force: bool,
     #[command(flatten)]
     pub(crate) scans: ScanArgs,
-    /// Chunk compression of the output.
-    #[arg(long, value_enum, default_value_t = OutputCompression::Zstd)]
-    pub(crate) compression: OutputCompression,
     /// Also write the run summary as JSON to this file.
     #[arg(long, value_name = "FILE")]
     pub(crate) json_summary: Option<PathBuf>,
@@ -223,31 +234,12 @@ pub(crate) struct ProcessArgs {
     /// this JSON file (schema: schemas/looming.NearMissEvents.schema.json).
     #[arg(long, value_name = "FILE.json")]
     pub(crate) events: Option<PathBuf>,
-    /// Per-point fields of /looming/points: `default` (x, y, z, looming,
-    /// colour) or `full` (adds l_lidar, l_ego, l_ray_ego, disagreement,
-    /// confidence, threat, mask).
-    #[arg(long, value_enum, default_value_t = FieldSet::Default)]
-    pub(crate) fields: FieldSet,
     /// Accept an input that already holds /looming/* channels: drop them and
     /// write fresh ones.
     #[arg(long)]
     pub(crate) replace: bool,
-    /// Threat levels low, medium, high as times to contact, seconds.
-    #[arg(long, value_name = "LOW,MEDIUM,HIGH", default_value = "3,1.5,1", value_parser = parse_threat_ttc)]
-    pub(crate) threat_ttc: [f64; 3],
-    /// Near-miss threshold as a time to contact, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 1.5)]
-    pub(crate) event_ttc: f64,
-    /// Smallest near-miss cluster, range-image cells [default: the cells a
-    /// 0.3 m square covers at 10 m, at least 3: 40 at 64 x 2048, 5 at 32 x 512].
-    #[arg(long, value_name = "CELLS")]
-    pub(crate) event_min_cells: Option<usize>,
-    /// Consecutive scan pairs a cluster must last to be a near miss.
-    #[arg(long, value_name = "PAIRS", default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
-    pub(crate) event_min_pairs: u64,
-    /// Half width of the ego corridor in which near misses are sought, metres.
-    #[arg(long, value_name = "METRES", default_value_t = 2.0)]
-    pub(crate) corridor_half_width: f64,
+    #[command(flatten)]
+    pub(crate) annotate: AnnotateArgs,
     /// No progress bar and no summary on stderr.
     #[arg(short, long)]
     pub(crate) quiet: bool,
@@ -319,4 +311,63 @@ pub(crate) struct ScanArgs {
     /// Most points accepted in one scan (larger clouds are bad messages).
     #[arg(long, value_name = "N", default_value_t = 4_000_000)]
     pub(crate) max_points: usize,
+}
+
+/// What `process` adds to a log and how it writes it: shared by `process`
+/// and `batch`.
+#[derive(Debug, Args)]
+pub(crate) struct AnnotateArgs {
+    /// Chunk compression of the output.
+    #[arg(long, value_enum, default_value_t = OutputCompression::Zstd)]
+    pub(crate) compression: OutputCompression,
+    /// Per-point fields of /looming/points: `default` (x, y, z, looming,
+    /// colour) or `full` (adds l_lidar, l_ego, l_ray_ego, disagreement,
+    /// confidence, threat, mask).
+    #[arg(long, value_enum, default_value_t = FieldSet::Default)]
+    pub(crate) fields: FieldSet,
+    /// Threat levels low, medium, high as times to contact, seconds.
+    #[arg(long, value_name = "LOW,MEDIUM,HIGH", default_value = "3,1.5,1", value_parser = parse_threat_ttc)]
+    pub(crate) threat_ttc: [f64; 3],
+    /// Near-miss threshold as a time to contact, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 1.5)]
+    pub(crate) event_ttc: f64,
+    /// Smallest near-miss cluster, range-image cells [default: the cells a
+    /// 0.3 m square covers at 10 m, at least 3: 40 at 64 x 2048, 5 at 32 x 512].
+    #[arg(long, value_name = "CELLS")]
+    pub(crate) event_min_cells: Option<usize>,
+    /// Consecutive scan pairs a cluster must last to be a near miss.
+    #[arg(long, value_name = "PAIRS", default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
+    pub(crate) event_min_pairs: u64,
+    /// Half width of the ego corridor in which near misses are sought, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 2.0)]
+    pub(crate) corridor_half_width: f64,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct BatchArgs {
+    /// Folders (every *.mcap below them), MCAP files, or manifests (.txt).
+    #[arg(required = true)]
+    pub(crate) inputs: Vec<PathBuf>,
+    /// Output folder: logs/ (the annotated logs, same relative paths as
+    /// below an input folder), fleet.json, near_misses.jsonl, near_misses.csv.
+    #[arg(short, long, value_name = "OUT_DIR")]
+    pub(crate) output: PathBuf,
+    /// Logs processed at once [default: half the cores, at least 1: the
+    /// engine uses every core inside a log].
+    #[arg(long, value_name = "N")]
+    pub(crate) jobs: Option<usize>,
+    /// Take shard K of N (0-based; a log's shard depends only on its path),
+    /// e.g. from a Kubernetes Indexed Job's JOB_COMPLETION_INDEX.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub(crate) shard: Option<looming::commands::batch::Shard>,
+    /// Redo every log, even those whose output is up to date.
+    #[arg(long)]
+    pub(crate) force: bool,
+    #[command(flatten)]
+    pub(crate) scans: ScanArgs,
+    #[command(flatten)]
+    pub(crate) annotate: AnnotateArgs,
+    /// No progress bar and no per-log lines on stderr.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
 }

@@ -14,8 +14,8 @@ use looming::pipeline::ProcessError;
 
 pub use args::Cli;
 use args::{
-    Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, ProcessArgs, QualityArgs,
-    RenderArgs, SynthArgs,
+    BatchArgs, Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, ProcessArgs,
+    QualityArgs, RenderArgs, SynthArgs,
 };
 pub(crate) use hints::hint;
 use report::{Progress, summary_text};
@@ -48,6 +48,7 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 pub fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Process(args) => process(args),
+        Command::Batch(args) => batch(args),
         Command::Inspect(args) => inspect(args),
         Command::Synth(args) => synth(args),
         Command::Eval(args) => eval(args),
@@ -83,6 +84,32 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
     }
     if !args.quiet {
         eprint!("{}", summary_text(&summary));
+    }
+    Ok(())
+}
+
+fn batch(args: BatchArgs) -> Result<(), Failure> {
+    use looming::commands::batch::{LogStatus, run_batch};
+    let options = resolve::batch_options(&args)?;
+    let bar = report::BatchBar::new(args.quiet);
+    let outcomes = run_batch(&options, &bar);
+    bar.bar.finish_and_clear();
+    let outcomes = outcomes?;
+    if !args.quiet {
+        eprint!("{}", report::batch_summary(&outcomes, &options.out_dir));
+    }
+    let failed = outcomes
+        .iter()
+        .filter(|o| o.record.entry.status == LogStatus::Failed)
+        .count();
+    if failed > 0 {
+        return Err(Failure::with_code(
+            anyhow::anyhow!(
+                "{failed} logs failed (see {})",
+                options.out_dir.join("fleet.json").display()
+            ),
+            1,
+        ));
     }
     Ok(())
 }

@@ -6,6 +6,7 @@ use std::io::IsTerminal;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use looming::commands::batch::{BatchLog, BatchProgress, LogOutcome, LogStatus, RunAction};
 use looming::input::ReadMode;
 use looming::model::format_log_time;
 use looming::output::WriteMode;
@@ -217,4 +218,84 @@ fn size_line(out: &mut String, s: &RunSummary) {
         s.elapsed_s,
         mb(s.input_bytes) / s.elapsed_s.max(1e-9)
     );
+}
+
+/// `looming batch`'s progress: a bar over the logs with an ETA, and a line
+/// per log.
+pub(crate) struct BatchBar {
+    pub(crate) bar: ProgressBar,
+    quiet: bool,
+}
+
+impl BatchBar {
+    pub(crate) fn new(quiet: bool) -> Self {
+        let bar = if quiet {
+            ProgressBar::hidden()
+        } else {
+            let bar = ProgressBar::with_draw_target(Some(0), ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "[{elapsed_precise}] {wide_bar} {pos}/{len} logs (eta {eta})",
+                )
+                .expect("static template is valid"),
+            );
+            bar
+        };
+        Self { bar, quiet }
+    }
+}
+
+impl BatchProgress for BatchBar {
+    fn start(&self, logs: usize) {
+        self.bar.set_length(logs as u64);
+    }
+
+    fn done(&self, log: &BatchLog, outcome: &LogOutcome) {
+        self.bar.inc(1);
+        if self.quiet {
+            return;
+        }
+        // Above the bar on a terminal; plain lines into a log file.
+        if self.bar.is_hidden() {
+            eprintln!("{}", batch_line(log, outcome));
+        } else {
+            self.bar.println(batch_line(log, outcome));
+        }
+    }
+}
+
+/// One log's line.
+fn batch_line(log: &BatchLog, outcome: &LogOutcome) -> String {
+    let entry = &outcome.record.entry;
+    let what = match (outcome.action, entry.status) {
+        (RunAction::UpToDate, _) => "up-to-date".to_owned(),
+        (RunAction::Ran, LogStatus::Processed) => format!(
+            "processed ({} scans, {} near misses) in {:.1} s",
+            entry.scans, entry.events, entry.seconds
+        ),
+        (RunAction::Ran, LogStatus::Skipped) => "skipped".to_owned(),
+        (RunAction::Ran, LogStatus::Failed) => "failed".to_owned(),
+    };
+    let reason = entry
+        .reason
+        .as_deref()
+        .map_or(String::new(), |r| format!(": {r}"));
+    format!("  {} {what}{reason}", log.relative.display())
+}
+
+/// The batch in a few lines.
+pub(crate) fn batch_summary(outcomes: &[LogOutcome], out_dir: &std::path::Path) -> String {
+    let count = |f: &dyn Fn(&LogOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
+    let ran = |status| count(&|o| o.action == RunAction::Ran && o.record.entry.status == status);
+    let near_misses: usize = outcomes.iter().map(|o| o.record.near_misses.len()).sum();
+    format!(
+        "looming batch: {} logs: {} processed, {} up to date, {} skipped, {} failed; {} near misses -> {}\n",
+        outcomes.len(),
+        ran(LogStatus::Processed),
+        count(&|o| o.action == RunAction::UpToDate),
+        ran(LogStatus::Skipped),
+        ran(LogStatus::Failed),
+        near_misses,
+        out_dir.join("near_misses.csv").display()
+    )
 }

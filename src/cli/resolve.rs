@@ -14,7 +14,11 @@ use looming::pipeline::{ProcessConfig, ScanOptions};
 use looming::topics::TopicOverrides;
 
 use super::Failure;
-use super::args::{ProcessArgs, RenderArgs, ScanArgs};
+use std::path::PathBuf;
+
+use looming::commands::batch::{BatchOptions, Shard};
+
+use super::args::{AnnotateArgs, BatchArgs, ProcessArgs, RenderArgs, ScanArgs};
 
 /// A usage error: exit code 2.
 fn usage(message: String) -> Failure {
@@ -82,8 +86,23 @@ pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
     })
 }
 
+/// `--shard K/N` (a clap value parser).
+pub(crate) fn parse_shard(text: &str) -> Result<Shard, String> {
+    let (index, count) = text
+        .split_once('/')
+        .ok_or_else(|| format!("{text:?}: expected K/N, e.g. 0/4"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
+    let (index, count) = (parse(index)?, parse(count)?);
+    if count == 0 || index >= count {
+        return Err(format!(
+            "{text:?}: K must be below N (0-based), N at least 1"
+        ));
+    }
+    Ok(Shard { index, count })
+}
+
 /// The near-miss detector's settings, checked.
-fn event_config(args: &ProcessArgs) -> Result<EventConfig, Failure> {
+fn event_config(args: &AnnotateArgs) -> Result<EventConfig, Failure> {
     if !(args.event_ttc.is_finite() && args.event_ttc > 0.0) {
         return Err(usage(
             "--event-ttc must be a positive number of seconds".into(),
@@ -106,29 +125,61 @@ fn event_config(args: &ProcessArgs) -> Result<EventConfig, Failure> {
     })
 }
 
+/// What `process` adds to a log, checked.
+fn annotate_config(args: &AnnotateArgs) -> Result<AnnotateConfig, Failure> {
+    Ok(AnnotateConfig {
+        engine: EngineConfig {
+            threat_ttc_s: args.threat_ttc,
+            ..EngineConfig::default()
+        },
+        events: event_config(args)?,
+        fields: args.fields.into(),
+    })
+}
+
 /// `looming process`'s configuration.
 pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failure> {
     let scans = scan_options(&args.scans)?;
-    let events = event_config(args)?;
     Ok(ProcessConfig {
         input: args.input.clone(),
         output: args.output.clone(),
         scans,
         output_options: OutputOptions {
-            compression: args.compression.into(),
+            compression: args.annotate.compression.into(),
             force: args.force,
             ..OutputOptions::default()
         },
-        annotate: AnnotateConfig {
-            engine: EngineConfig {
-                threat_ttc_s: args.threat_ttc,
-                ..EngineConfig::default()
-            },
-            events,
-            fields: args.fields.into(),
-        },
+        annotate: annotate_config(&args.annotate)?,
         replace: args.replace,
         events_file: args.events.clone(),
+    })
+}
+
+/// `looming batch`'s options: `process`'s configuration for every log.
+pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
+    if args.jobs == Some(0) {
+        return Err(usage("--jobs must be at least 1".into()));
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let process = ProcessConfig {
+        input: PathBuf::new(),
+        output: PathBuf::new(),
+        scans: scan_options(&args.scans)?,
+        output_options: OutputOptions {
+            compression: args.annotate.compression.into(),
+            ..OutputOptions::default()
+        },
+        annotate: annotate_config(&args.annotate)?,
+        replace: false,
+        events_file: None,
+    };
+    Ok(BatchOptions {
+        inputs: args.inputs.clone(),
+        out_dir: args.output.clone(),
+        jobs: args.jobs.unwrap_or((cores / 2).max(1)),
+        shard: args.shard,
+        force: args.force,
+        process,
     })
 }
 

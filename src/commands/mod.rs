@@ -6,6 +6,7 @@
 //! They use the pipeline's stages; no stage uses them.
 
 mod annotated;
+pub mod batch;
 pub mod eval;
 pub mod events;
 pub mod inspect;

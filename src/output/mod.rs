@@ -15,7 +15,7 @@ mod passthrough;
 mod raw;
 mod summary;
 mod temp;
-pub use temp::{AtomicFile, AtomicTarget};
+pub use temp::{AtomicFile, AtomicTarget, remove_stale_temp_files};
 
 use std::collections::BTreeMap;
 use std::fs::File;

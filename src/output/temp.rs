@@ -40,6 +40,34 @@ pub(crate) fn beside(path: &Path) -> std::io::Result<NamedTempFile> {
     builder.tempfile_in(&dir)
 }
 
+/// Remove the temporary files [`beside`] left for `path` by a run that was
+/// killed before it could clean up; the number removed. Only a caller that
+/// knows no other process is writing `path` may call this.
+pub fn remove_stale_temp_files(path: &Path) -> std::io::Result<usize> {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return Ok(0);
+    };
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let mut removed = 0;
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(0);
+    };
+    for entry in entries {
+        let entry = entry?;
+        let entry_name = entry.file_name().to_string_lossy().into_owned();
+        if entry_name.starts_with(&prefix) && entry_name.ends_with(".tmp") {
+            std::fs::remove_file(entry.path())?;
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// A file being written under a temporary name beside its destination.
 /// [`commit`](Self::commit) syncs it and renames it onto the destination;
 /// dropped uncommitted (an error on the way), the temporary file is removed

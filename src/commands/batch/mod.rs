@@ -1,0 +1,273 @@
+//! `looming batch`: `process` over a fleet of logs on one machine. Each log's
+//! output goes below `OUT_DIR/logs/` (written atomically, as `process`
+//! writes it) with a record beside it; a log whose record still holds (same
+//! input fingerprint, same configuration, output present) is not run again,
+//! so a re-run after a crash or a kill redoes only what is missing. One bad
+//! log never stops the batch: it is recorded as failed, with the reason. The
+//! fleet files (`fleet`) are rebuilt from the records at the end.
+
+mod fleet;
+mod inputs;
+mod record;
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+pub use fleet::{FLEET_JSON, FleetNearMiss, NEAR_MISSES_CSV, NEAR_MISSES_JSONL};
+pub use inputs::{BatchLog, Shard, discover};
+pub use record::{FleetEntry, InputFingerprint, LogRecord, LogStatus};
+
+use crate::output::remove_stale_temp_files;
+use crate::pipeline::{NoProgress, ProcessConfig, ProcessError, process};
+use crate::topics::TopicError;
+
+/// Everything `looming batch` needs to know.
+#[derive(Debug, Clone)]
+pub struct BatchOptions {
+    pub inputs: Vec<PathBuf>,
+    pub out_dir: PathBuf,
+    /// Logs processed at once.
+    pub jobs: usize,
+    pub shard: Option<Shard>,
+    /// Redo every log, records or not.
+    pub force: bool,
+    /// `process`'s configuration for every log (its input and output are
+    /// set per log).
+    pub process: ProcessConfig,
+}
+
+/// What this run did with a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunAction {
+    /// Run now (whatever its status).
+    Ran,
+    /// Its record still held: not run again.
+    UpToDate,
+}
+
+/// A log's outcome in this run.
+#[derive(Debug, Clone)]
+pub struct LogOutcome {
+    pub record: LogRecord,
+    pub action: RunAction,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BatchError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Hears how a batch goes (from its worker threads).
+pub trait BatchProgress: Sync {
+    /// The logs found, before any runs.
+    fn start(&self, logs: usize);
+    /// A log finished.
+    fn done(&self, log: &BatchLog, outcome: &LogOutcome);
+}
+
+/// Run the batch. The outcomes come back in the logs' order.
+pub fn run_batch(
+    options: &BatchOptions,
+    progress: &dyn BatchProgress,
+) -> Result<Vec<LogOutcome>, BatchError> {
+    let io_error = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| BatchError::Io { path, source }
+    };
+    let mut logs = discover(&options.inputs).map_err(io_error(&options.out_dir))?;
+    if let Some(shard) = options.shard {
+        logs = shard.select(logs);
+    }
+    progress.start(logs.len());
+    let config_crc32 = config_fingerprint(&options.process);
+    let next = AtomicUsize::new(0);
+    let outcomes = Mutex::new(vec![None; logs.len()]);
+    std::thread::scope(|scope| {
+        for _ in 0..options.jobs.clamp(1, logs.len().max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let index = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(log) = logs.get(index) else { break };
+                    let outcome = run_log(options, log, config_crc32);
+                    progress.done(log, &outcome);
+                    outcomes.lock().unwrap_or_else(|e| e.into_inner())[index] = Some(outcome);
+                }
+            });
+        }
+    });
+    let outcomes: Vec<LogOutcome> = outcomes
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .flatten()
+        .collect();
+    let records: Vec<LogRecord> = outcomes.iter().map(|o| o.record.clone()).collect();
+    fleet::write_fleet_files(&options.out_dir, &records).map_err(io_error(&options.out_dir))?;
+    Ok(outcomes)
+}
+
+/// The configuration's fingerprint: what a log's record must match.
+fn config_fingerprint(config: &ProcessConfig) -> u32 {
+    let mut template = config.clone();
+    template.input = PathBuf::new();
+    template.output = PathBuf::new();
+    crc32fast::hash(
+        serde_json::to_string(&template)
+            .unwrap_or_default()
+            .as_bytes(),
+    )
+}
+
+/// Where a log's output and record go.
+fn output_paths(out_dir: &Path, log: &BatchLog) -> (PathBuf, PathBuf) {
+    let output = out_dir.join("logs").join(&log.relative);
+    let mut record = output.clone().into_os_string();
+    record.push(".batch.json");
+    (output, PathBuf::from(record))
+}
+
+/// One log: its record if it still holds, else a run of `process`.
+fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutcome {
+    let (output, record_path) = output_paths(&options.out_dir, log);
+    let fingerprint = match InputFingerprint::of(&log.input) {
+        Ok(fingerprint) => fingerprint,
+        Err(error) => return unreadable(log, &error.to_string()),
+    };
+    if !options.force
+        && let Some(record) = LogRecord::read(&record_path)
+        && record.holds_for(&fingerprint, config_crc32)
+    {
+        return LogOutcome {
+            record,
+            action: RunAction::UpToDate,
+        };
+    }
+    // A run killed mid-log leaves its temporary output (and the record of
+    // that log unwritten): clear it before the log is redone.
+    let _ = remove_stale_temp_files(&output);
+    let _ = remove_stale_temp_files(&record_path);
+    let record = process_log(options, log, &output, fingerprint, config_crc32);
+    // A record that cannot be written only costs a re-run next time.
+    let _ = record.write(&record_path);
+    // The fleet files are built from the record as a later run reads it
+    // back, so that they do not change when nothing else does (a float read
+    // back from JSON need not be the float written).
+    let record = record.read_back();
+    LogOutcome {
+        record,
+        action: RunAction::Ran,
+    }
+}
+
+/// A log that cannot even be opened: failed, and not remembered.
+fn unreadable(log: &BatchLog, reason: &str) -> LogOutcome {
+    LogOutcome {
+        record: LogRecord {
+            input: InputFingerprint {
+                size_bytes: 0,
+                modified_ns: 0,
+                ends_crc32: 0,
+            },
+            config_crc32: 0,
+            entry: entry(log, None, LogStatus::Failed, Some(reason.to_owned()), 0.0),
+            near_misses: Vec::new(),
+        },
+        action: RunAction::Ran,
+    }
+}
+
+fn entry(
+    log: &BatchLog,
+    output: Option<PathBuf>,
+    status: LogStatus,
+    reason: Option<String>,
+    seconds: f64,
+) -> FleetEntry {
+    FleetEntry {
+        input: log.input.clone(),
+        output,
+        status,
+        reason,
+        scans: 0,
+        pairs: 0,
+        events: 0,
+        bad_messages: 0,
+        seconds,
+    }
+}
+
+/// Run `process` on the log into `output`.
+fn process_log(
+    options: &BatchOptions,
+    log: &BatchLog,
+    output: &Path,
+    fingerprint: InputFingerprint,
+    config_crc32: u32,
+) -> LogRecord {
+    let started = Instant::now();
+    let mut config = options.process.clone();
+    config.input = log.input.clone();
+    config.output = output.to_path_buf();
+    // The record decides whether a log is redone; an output without one is
+    // from an interrupted run.
+    config.output_options.force = true;
+    let result = process(&config, &NoProgress);
+    let seconds = (started.elapsed().as_secs_f64() * 1000.0).round() / 1000.0;
+    let (entry, near_misses) = match result {
+        Ok(summary) => {
+            let mut entry = entry(
+                log,
+                Some(output.to_path_buf()),
+                LogStatus::Processed,
+                None,
+                seconds,
+            );
+            entry.scans = summary.decoded.scans;
+            entry.pairs = summary.pairs_written;
+            entry.events = summary.events.len();
+            entry.bad_messages = summary.bad_messages;
+            // Processed, but only up to where the file ends.
+            entry.reason = summary.input_report.truncated.clone();
+            (entry, summary.events)
+        }
+        Err(ProcessError::Topic {
+            source: TopicError::Missing(reason),
+            ..
+        }) => (
+            entry(
+                log,
+                None,
+                LogStatus::Skipped,
+                Some(first_line(&reason)),
+                seconds,
+            ),
+            Vec::new(),
+        ),
+        Err(error) => (
+            entry(
+                log,
+                None,
+                LogStatus::Failed,
+                Some(error.to_string()),
+                seconds,
+            ),
+            Vec::new(),
+        ),
+    };
+    LogRecord {
+        input: fingerprint,
+        config_crc32,
+        entry,
+        near_misses,
+    }
+}
+
+fn first_line(text: &str) -> String {
+    text.lines().next().unwrap_or_default().to_owned()
+}

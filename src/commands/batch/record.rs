@@ -1,0 +1,128 @@
+//! What a batch remembers of each log, beside its output
+//! (`OUT_DIR/logs/<log>.batch.json`): the input's fingerprint, the
+//! configuration's, and the log's entry in the fleet table with its near
+//! misses. A log whose record matches its input and the configuration is
+//! not run again.
+
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::time::UNIX_EPOCH;
+
+use serde::{Deserialize, Serialize};
+
+use crate::events::NearMissEvent;
+use crate::output::AtomicFile;
+
+/// Bytes read at each end of an input for its content fingerprint: enough
+/// to tell logs apart (headers, summaries, footers differ) without reading
+/// gigabytes.
+const FINGERPRINT_END_BYTES: u64 = 64 << 10;
+
+/// How an input is recognised without reading it whole.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InputFingerprint {
+    pub size_bytes: u64,
+    pub modified_ns: u128,
+    /// CRC-32 of the first and last `FINGERPRINT_END_BYTES` bytes.
+    pub ends_crc32: u32,
+}
+
+impl InputFingerprint {
+    pub fn of(path: &Path) -> std::io::Result<Self> {
+        let mut file = std::fs::File::open(path)?;
+        let metadata = file.metadata()?;
+        let size_bytes = metadata.len();
+        let modified_ns = metadata
+            .modified()?
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
+        let mut hasher = crc32fast::Hasher::new();
+        let mut head = Vec::new();
+        (&mut file)
+            .take(FINGERPRINT_END_BYTES)
+            .read_to_end(&mut head)?;
+        hasher.update(&head);
+        if size_bytes > 2 * FINGERPRINT_END_BYTES {
+            file.seek(SeekFrom::End(-(FINGERPRINT_END_BYTES as i64)))?;
+            let mut tail = Vec::new();
+            file.take(FINGERPRINT_END_BYTES).read_to_end(&mut tail)?;
+            hasher.update(&tail);
+        }
+        Ok(Self {
+            size_bytes,
+            modified_ns,
+            ends_crc32: hasher.finalize(),
+        })
+    }
+}
+
+/// What happened to a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LogStatus {
+    /// Annotated: its output is complete.
+    Processed,
+    /// Not processed, by policy (no LiDAR topic).
+    Skipped,
+    /// Could not be processed (unreadable, truncated past use, not MCAP...).
+    Failed,
+}
+
+/// A log's line in `fleet.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FleetEntry {
+    pub input: PathBuf,
+    pub output: Option<PathBuf>,
+    pub status: LogStatus,
+    pub reason: Option<String>,
+    pub scans: u64,
+    pub pairs: u64,
+    pub events: usize,
+    pub bad_messages: u64,
+    /// Wall time of the run that did the work, seconds.
+    pub seconds: f64,
+}
+
+/// The record kept beside a log's output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LogRecord {
+    pub input: InputFingerprint,
+    pub config_crc32: u32,
+    pub entry: FleetEntry,
+    pub near_misses: Vec<NearMissEvent>,
+}
+
+impl LogRecord {
+    /// The record at `path`, if there is a readable one.
+    pub fn read(path: &Path) -> Option<Self> {
+        serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+    }
+
+    /// The record as it reads back from its JSON.
+    pub fn read_back(self) -> Self {
+        serde_json::to_vec(&self)
+            .ok()
+            .and_then(|bytes| serde_json::from_slice(&bytes).ok())
+            .unwrap_or(self)
+    }
+
+    /// Written whole or not at all.
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        let mut file = AtomicFile::create(path)?;
+        serde_json::to_writer_pretty(&mut file, self)?;
+        file.commit()?;
+        Ok(())
+    }
+
+    /// Still true of `input` under the configuration `config_crc32`, its
+    /// output (when it has one) complete.
+    pub fn holds_for(&self, input: &InputFingerprint, config_crc32: u32) -> bool {
+        self.input == *input
+            && self.config_crc32 == config_crc32
+            && self
+                .entry
+                .output
+                .as_ref()
+                .is_none_or(|output| output.exists())
+    }
+}

@@ -1,0 +1,260 @@
+//! `looming batch` through the real CLI on a small fleet: two planted near
+//! misses, a safe drive, a truncated log, a log without LiDAR and a file of
+//! random bytes.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{looming, scratch, stderr};
+
+fn sample(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("sample_logs")
+        .join(name)
+}
+
+/// A log with an IMU channel and no LiDAR.
+fn imu_only_log() -> Vec<u8> {
+    let mut log = looming::testkit::LogBuilder::new(looming::testkit::Layout::indexed(), "ros2");
+    log.schema(1, "sensor_msgs/msg/Imu", "ros2msg", b"");
+    log.channel(1, 1, "/imu/data", "cdr");
+    for i in 0..10u64 {
+        log.message(
+            1,
+            i as u32,
+            1_000 + i * 10_000_000,
+            1_000 + i * 10_000_000,
+            &[0; 8],
+        );
+    }
+    log.finish()
+}
+
+/// The fleet folder: `day1/cut-in.mcap`, `day1/crossing.mcap`, `safe.mcap`,
+/// `truncated.mcap`, `no-lidar.mcap`, `garbage.mcap`.
+fn fleet(dir: &Path) -> PathBuf {
+    let input = dir.join("in");
+    std::fs::create_dir_all(input.join("day1")).unwrap();
+    for name in ["cut-in.mcap", "crossing.mcap"] {
+        std::fs::copy(sample(name), input.join("day1").join(name)).unwrap();
+    }
+    let safe = std::fs::read(sample("straight-road.mcap")).unwrap();
+    std::fs::write(input.join("safe.mcap"), &safe).unwrap();
+    std::fs::write(input.join("truncated.mcap"), &safe[..safe.len() * 2 / 3]).unwrap();
+    std::fs::write(input.join("no-lidar.mcap"), imu_only_log()).unwrap();
+    let garbage: Vec<u8> = (0..50_000u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    std::fs::write(input.join("garbage.mcap"), garbage).unwrap();
+    input
+}
+
+fn batch(input: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "batch",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    looming(&args)
+}
+
+fn fleet_entries(out: &Path) -> Vec<serde_json::Value> {
+    serde_json::from_slice(&std::fs::read(out.join("fleet.json")).unwrap()).unwrap()
+}
+
+fn entry<'a>(entries: &'a [serde_json::Value], log: &str) -> &'a serde_json::Value {
+    entries
+        .iter()
+        .find(|e| e["input"].as_str().unwrap().ends_with(log))
+        .unwrap_or_else(|| panic!("{log} not in fleet.json"))
+}
+
+fn fleet_files(out: &Path) -> Vec<Vec<u8>> {
+    ["fleet.json", "near_misses.jsonl", "near_misses.csv"]
+        .iter()
+        .map(|f| std::fs::read(out.join(f)).unwrap())
+        .collect()
+}
+
+#[test]
+fn a_fleet_gets_a_status_per_log_and_its_near_misses_ranked() {
+    let dir = scratch("batch-fleet");
+    let input = fleet(&dir);
+    let out = dir.join("out");
+    let run = batch(&input, &out, &[]);
+    assert_eq!(
+        run.status.code(),
+        Some(1),
+        "the garbage log fails: {}",
+        stderr(&run)
+    );
+    let entries = fleet_entries(&out);
+    assert_eq!(entries.len(), 6);
+    for log in ["cut-in.mcap", "crossing.mcap", "safe.mcap"] {
+        assert_eq!(entry(&entries, log)["status"], "processed", "{log}");
+    }
+    assert!(out.join("logs/day1/cut-in.mcap").exists());
+    let truncated = entry(&entries, "truncated.mcap");
+    assert_eq!(truncated["status"], "processed");
+    assert!(truncated["reason"].as_str().unwrap().contains("truncated"));
+    let no_lidar = entry(&entries, "no-lidar.mcap");
+    assert_eq!(no_lidar["status"], "skipped");
+    assert!(
+        no_lidar["reason"]
+            .as_str()
+            .unwrap()
+            .contains("no LiDAR topic")
+    );
+    let garbage = entry(&entries, "garbage.mcap");
+    assert_eq!(garbage["status"], "failed");
+    assert!(
+        garbage["reason"]
+            .as_str()
+            .unwrap()
+            .contains("not an MCAP file")
+    );
+
+    let jsonl = std::fs::read_to_string(out.join("near_misses.jsonl")).unwrap();
+    let ranked: Vec<serde_json::Value> = jsonl
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let logs: Vec<&str> = ranked.iter().map(|n| n["log"].as_str().unwrap()).collect();
+    assert_eq!(logs.len(), 2, "{jsonl}");
+    assert!(logs[0].ends_with("cut-in.mcap") && logs[1].ends_with("crossing.mcap"));
+    let ttc = |n: &serde_json::Value| n["min_time_to_contact_s"].as_f64().unwrap();
+    assert!(ttc(&ranked[0]) <= ttc(&ranked[1]));
+    let csv = std::fs::read_to_string(out.join("near_misses.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+}
+
+#[test]
+fn a_second_run_redoes_nothing_and_writes_the_same_fleet_files() {
+    let dir = scratch("batch-rerun");
+    let input = fleet(&dir);
+    let out = dir.join("out");
+    batch(&input, &out, &["-q"]);
+    let first = fleet_files(&out);
+    let cut_in = std::fs::metadata(out.join("logs/day1/cut-in.mcap"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let run = batch(&input, &out, &[]);
+    let text = stderr(&run);
+    assert!(text.contains("0 processed, 6 up to date"), "{text}");
+    assert_eq!(fleet_files(&out), first);
+    let again = std::fs::metadata(out.join("logs/day1/cut-in.mcap"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(cut_in, again, "an up-to-date log is not rewritten");
+    // --force redoes everything, with the same results.
+    let run = batch(&input, &out, &["--force"]);
+    assert!(
+        stderr(&run).contains("4 processed, 0 up to date"),
+        "{}",
+        stderr(&run)
+    );
+    assert_eq!(fleet_files(&out)[1], first[1]);
+}
+
+#[test]
+fn shards_split_the_fleet_without_overlap() {
+    let dir = scratch("batch-shards");
+    let input = fleet(&dir);
+    let mut seen = Vec::new();
+    for shard in ["0/2", "1/2"] {
+        let out = dir.join(format!("out-{}", shard.replace('/', "-")));
+        batch(&input, &out, &["--shard", shard, "-q"]);
+        seen.extend(
+            fleet_entries(&out)
+                .iter()
+                .map(|e| e["input"].as_str().unwrap().to_owned()),
+        );
+    }
+    seen.sort();
+    let before = seen.len();
+    seen.dedup();
+    assert_eq!((before, seen.len()), (6, 6), "{seen:?}");
+    let bad = batch(&input, &dir.join("x"), &["--shard", "2/2"]);
+    assert_eq!(bad.status.code(), Some(2));
+}
+
+#[test]
+fn a_manifest_and_single_files_are_inputs_too() {
+    let dir = scratch("batch-manifest");
+    let input = fleet(&dir);
+    std::fs::write(
+        dir.join("list.txt"),
+        "in/day1/cut-in.mcap\n# a comment\n\nin/safe.mcap\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let run = looming(&[
+        "batch",
+        dir.join("list.txt").to_str().unwrap(),
+        input.join("day1/crossing.mcap").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--jobs",
+        "2",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let entries = fleet_entries(&out);
+    assert_eq!(entries.len(), 3);
+    assert!(out.join("logs/cut-in.mcap").exists() && out.join("logs/crossing.mcap").exists());
+}
+
+#[test]
+fn a_killed_batch_is_completed_by_the_next_run_without_partial_outputs() {
+    let dir = scratch("batch-kill");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    for i in 0..6 {
+        std::fs::copy(sample("cut-in.mcap"), input.join(format!("drive-{i}.mcap"))).unwrap();
+    }
+    let out = dir.join("out");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_looming"))
+        .args([
+            "batch",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--jobs",
+            "1",
+            "-q",
+        ])
+        .spawn()
+        .unwrap();
+    // Kill it once the first log is done and before the last is.
+    let first_record = out.join("logs/drive-0.mcap.batch.json");
+    while !first_record.exists() {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done_before = (0..6)
+        .filter(|i| out.join(format!("logs/drive-{i}.mcap.batch.json")).exists())
+        .count();
+    assert!(done_before < 6, "the kill came after the last log");
+    let run = batch(&input, &out, &[]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let text = stderr(&run);
+    assert!(
+        text.contains(&format!(
+            "{} processed, {done_before} up to date",
+            6 - done_before
+        )),
+        "{text}"
+    );
+    let leftovers: Vec<String> = std::fs::read_dir(out.join("logs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    assert_eq!(fleet_entries(&out).len(), 6);
+}
