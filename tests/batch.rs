@@ -100,6 +100,12 @@ fn a_fleet_gets_a_status_per_log_and_its_near_misses_ranked() {
     let truncated = entry(&entries, "truncated.mcap");
     assert_eq!(truncated["status"], "processed");
     assert!(truncated["reason"].as_str().unwrap().contains("truncated"));
+    let quality = &entry(&entries, "cut-in.mcap")["quality"];
+    assert!(
+        quality["trusted_fraction"].as_f64().unwrap() > 0.5,
+        "{quality}"
+    );
+    assert!(quality["diagnoses"].is_array());
     let no_lidar = entry(&entries, "no-lidar.mcap");
     assert_eq!(no_lidar["status"], "skipped");
     assert!(
@@ -162,23 +168,46 @@ fn a_second_run_redoes_nothing_and_writes_the_same_fleet_files() {
 }
 
 #[test]
-fn shards_split_the_fleet_without_overlap() {
+fn shards_split_the_fleet_and_merge_into_the_single_run_files() {
     let dir = scratch("batch-shards");
     let input = fleet(&dir);
-    let mut seen = Vec::new();
+    let single = dir.join("single");
+    batch(&input, &single, &["-q"]);
+    let out = dir.join("sharded");
+    let mut done = Vec::new();
     for shard in ["0/2", "1/2"] {
-        let out = dir.join(format!("out-{}", shard.replace('/', "-")));
-        batch(&input, &out, &["--shard", shard, "-q"]);
-        seen.extend(
-            fleet_entries(&out)
-                .iter()
-                .map(|e| e["input"].as_str().unwrap().to_owned()),
-        );
+        let run = batch(&input, &out, &["--shard", shard]);
+        let text = stderr(&run);
+        assert!(text.contains("--merge-only"), "{text}");
+        done.push(text.lines().filter(|l| l.starts_with("  ")).count());
     }
-    seen.sort();
-    let before = seen.len();
-    seen.dedup();
-    assert_eq!((before, seen.len()), (6, 6), "{seen:?}");
+    assert_eq!(
+        done.iter().sum::<usize>(),
+        6,
+        "each log in exactly one shard: {done:?}"
+    );
+    assert!(
+        !out.join("fleet.json").exists(),
+        "a shard writes no fleet files"
+    );
+    let merged = looming(&["batch", "--merge-only", out.to_str().unwrap()]);
+    assert_eq!(merged.status.code(), Some(1), "the garbage log failed");
+    // The same tables as one run: the same bytes but for the output folder
+    // and each run's seconds.
+    let relative = |dir: &Path| -> Vec<String> {
+        fleet_files(dir)
+            .into_iter()
+            .map(|bytes| {
+                let text = String::from_utf8(bytes).unwrap();
+                let text = text.replace(dir.to_str().unwrap(), "OUT");
+                let lines = text
+                    .lines()
+                    .filter(|l| !l.trim_start().starts_with("\"seconds\""));
+                lines.collect::<Vec<_>>().join("\n")
+            })
+            .collect()
+    };
+    assert_eq!(relative(&out), relative(&single));
     let bad = batch(&input, &dir.join("x"), &["--shard", "2/2"]);
     assert_eq!(bad.status.code(), Some(2));
 }

@@ -346,12 +346,21 @@ pub(crate) struct AnnotateArgs {
 #[derive(Debug, Args)]
 pub(crate) struct BatchArgs {
     /// Folders (every *.mcap below them), MCAP files, or manifests (.txt).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "merge_only")]
     pub(crate) inputs: Vec<PathBuf>,
     /// Output folder: logs/ (the annotated logs, same relative paths as
     /// below an input folder), fleet.json, near_misses.jsonl, near_misses.csv.
-    #[arg(short, long, value_name = "OUT_DIR")]
-    pub(crate) output: PathBuf,
+    #[arg(
+        short,
+        long,
+        value_name = "OUT_DIR",
+        required_unless_present = "merge_only"
+    )]
+    pub(crate) output: Option<PathBuf>,
+    /// Only rebuild OUT_DIR's fleet files from its logs' records: after
+    /// sharded runs (which write no fleet files), or runs on other machines.
+    #[arg(long, value_name = "OUT_DIR", conflicts_with_all = ["inputs", "output", "shard", "force"])]
+    pub(crate) merge_only: Option<PathBuf>,
     /// Logs processed at once [default: half the cores, at least 1: the
     /// engine uses every core inside a log].
     #[arg(long, value_name = "N")]

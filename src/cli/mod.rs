@@ -89,24 +89,39 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
 }
 
 fn batch(args: BatchArgs) -> Result<(), Failure> {
-    use looming::commands::batch::{LogStatus, run_batch};
+    use looming::commands::batch::{LogRecord, merge_records, run_batch};
+    if let Some(out_dir) = &args.merge_only {
+        let records = merge_records(out_dir)?;
+        if !args.quiet {
+            eprint!("{}", report::merge_summary(&records, out_dir));
+        }
+        return failed_logs(records.iter(), out_dir);
+    }
     let options = resolve::batch_options(&args)?;
     let bar = report::BatchBar::new(args.quiet);
     let outcomes = run_batch(&options, &bar);
     bar.bar.finish_and_clear();
     let outcomes = outcomes?;
     if !args.quiet {
-        eprint!("{}", report::batch_summary(&outcomes, &options.out_dir));
+        eprint!("{}", report::batch_summary(&outcomes, &options));
     }
-    let failed = outcomes
-        .iter()
-        .filter(|o| o.record.entry.status == LogStatus::Failed)
+    let records: Vec<&LogRecord> = outcomes.iter().map(|o| &o.record).collect();
+    failed_logs(records.into_iter(), &options.out_dir)
+}
+
+/// Exit code 1 when any log failed.
+fn failed_logs<'a>(
+    records: impl Iterator<Item = &'a looming::commands::batch::LogRecord>,
+    out_dir: &std::path::Path,
+) -> Result<(), Failure> {
+    let failed = records
+        .filter(|r| r.entry.status == looming::commands::batch::LogStatus::Failed)
         .count();
     if failed > 0 {
         return Err(Failure::with_code(
             anyhow::anyhow!(
                 "{failed} logs failed (see {})",
-                options.out_dir.join("fleet.json").display()
+                out_dir.join("logs").display()
             ),
             1,
         ));

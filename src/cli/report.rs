@@ -6,7 +6,9 @@ use std::io::IsTerminal;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use looming::commands::batch::{BatchLog, BatchProgress, LogOutcome, LogStatus, RunAction};
+use looming::commands::batch::{
+    BatchLog, BatchOptions, BatchProgress, LogOutcome, LogRecord, LogStatus, RunAction,
+};
 use looming::input::ReadMode;
 use looming::model::format_log_time;
 use looming::output::WriteMode;
@@ -283,8 +285,20 @@ fn batch_line(log: &BatchLog, outcome: &LogOutcome) -> String {
     format!("  {} {what}{reason}", log.relative.display())
 }
 
+/// `--merge-only` in a line.
+pub(crate) fn merge_summary(records: &[LogRecord], out_dir: &std::path::Path) -> String {
+    let near_misses: usize = records.iter().map(|r| r.near_misses.len()).sum();
+    format!(
+        "looming batch: fleet files of {} logs, {} near misses -> {}\n",
+        records.len(),
+        near_misses,
+        out_dir.join("near_misses.csv").display()
+    )
+}
+
 /// The batch in a few lines.
-pub(crate) fn batch_summary(outcomes: &[LogOutcome], out_dir: &std::path::Path) -> String {
+pub(crate) fn batch_summary(outcomes: &[LogOutcome], options: &BatchOptions) -> String {
+    let out_dir = &options.out_dir;
     let count = |f: &dyn Fn(&LogOutcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
     let ran = |status| count(&|o| o.action == RunAction::Ran && o.record.entry.status == status);
     let near_misses: usize = outcomes.iter().map(|o| o.record.near_misses.len()).sum();
@@ -296,6 +310,13 @@ pub(crate) fn batch_summary(outcomes: &[LogOutcome], out_dir: &std::path::Path) 
         ran(LogStatus::Skipped),
         ran(LogStatus::Failed),
         near_misses,
-        out_dir.join("near_misses.csv").display()
+        match options.shard {
+            None => out_dir.join("near_misses.csv").display().to_string(),
+            Some(_) => format!(
+                "{} (a shard: fleet files by `looming batch --merge-only {}` once every shard is done)",
+                out_dir.join("logs").display(),
+                out_dir.display()
+            ),
+        }
     )
 }

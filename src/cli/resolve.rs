@@ -175,7 +175,7 @@ pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
     };
     Ok(BatchOptions {
         inputs: args.inputs.clone(),
-        out_dir: args.output.clone(),
+        out_dir: args.output.clone().unwrap_or_default(),
         jobs: args.jobs.unwrap_or((cores / 2).max(1)),
         shard: args.shard,
         force: args.force,

@@ -17,11 +17,14 @@ use std::time::Instant;
 
 pub use fleet::{FLEET_JSON, FleetNearMiss, NEAR_MISSES_CSV, NEAR_MISSES_JSONL};
 pub use inputs::{BatchLog, Shard, discover};
-pub use record::{FleetEntry, InputFingerprint, LogRecord, LogStatus};
+pub use record::{FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus};
 
 use crate::output::remove_stale_temp_files;
 use crate::pipeline::{NoProgress, ProcessConfig, ProcessError, process};
 use crate::topics::TopicError;
+
+/// What a log's record file adds to its output's name.
+const RECORD_SUFFIX: &str = ".batch.json";
 
 /// Everything `looming batch` needs to know.
 #[derive(Debug, Clone)]
@@ -107,9 +110,51 @@ pub fn run_batch(
         .into_iter()
         .flatten()
         .collect();
-    let records: Vec<LogRecord> = outcomes.iter().map(|o| o.record.clone()).collect();
-    fleet::write_fleet_files(&options.out_dir, &records).map_err(io_error(&options.out_dir))?;
+    // A shard sees only its logs: the fleet files come from `merge_records`
+    // once every shard is done.
+    if options.shard.is_none() {
+        let records: Vec<LogRecord> = outcomes.iter().map(|o| o.record.clone()).collect();
+        fleet::write_fleet_files(&options.out_dir, &records).map_err(io_error(&options.out_dir))?;
+    }
     Ok(outcomes)
+}
+
+/// Rebuild the fleet files of `out_dir` from every log record below
+/// `out_dir/logs` (after sharded runs, or runs on other machines); the
+/// records, in the order a single run lists its logs.
+pub fn merge_records(out_dir: &Path) -> Result<Vec<LogRecord>, BatchError> {
+    let logs_dir = out_dir.join("logs");
+    let mut paths = Vec::new();
+    record_files_below(&logs_dir, &mut paths).map_err(|source| BatchError::Io {
+        path: logs_dir.clone(),
+        source,
+    })?;
+    paths.sort();
+    let mut records = Vec::with_capacity(paths.len());
+    for path in paths {
+        let record = LogRecord::read(&path).ok_or_else(|| BatchError::Io {
+            source: std::io::Error::new(std::io::ErrorKind::InvalidData, "not a log record"),
+            path,
+        })?;
+        records.push(record);
+    }
+    fleet::write_fleet_files(out_dir, &records).map_err(|source| BatchError::Io {
+        path: out_dir.to_path_buf(),
+        source,
+    })?;
+    Ok(records)
+}
+
+fn record_files_below(dir: &Path, found: &mut Vec<PathBuf>) -> std::io::Result<()> {
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.is_dir() {
+            record_files_below(&path, found)?;
+        } else if path.to_string_lossy().ends_with(RECORD_SUFFIX) {
+            found.push(path);
+        }
+    }
+    Ok(())
 }
 
 /// The configuration's fingerprint: what a log's record must match.
@@ -128,7 +173,7 @@ fn config_fingerprint(config: &ProcessConfig) -> u32 {
 fn output_paths(out_dir: &Path, log: &BatchLog) -> (PathBuf, PathBuf) {
     let output = out_dir.join("logs").join(&log.relative);
     let mut record = output.clone().into_os_string();
-    record.push(".batch.json");
+    record.push(RECORD_SUFFIX);
     (output, PathBuf::from(record))
 }
 
@@ -199,6 +244,7 @@ fn entry(
         events: 0,
         bad_messages: 0,
         seconds,
+        quality: None,
     }
 }
 
@@ -234,6 +280,7 @@ fn process_log(
             entry.bad_messages = summary.bad_messages;
             // Processed, but only up to where the file ends.
             entry.reason = summary.input_report.truncated.clone();
+            entry.quality = fleet_quality(output);
             (entry, summary.events)
         }
         Err(ProcessError::Topic {
@@ -266,6 +313,21 @@ fn process_log(
         entry,
         near_misses,
     }
+}
+
+/// The quality figures of an annotated log (`None` if it cannot be read
+/// back, which the fleet table then shows).
+fn fleet_quality(output: &Path) -> Option<FleetQuality> {
+    let report = crate::commands::quality::read_quality(output).ok()?;
+    let totals = report.totals;
+    Some(FleetQuality {
+        trusted_fraction: totals.trusted_fraction,
+        ground_median_abs_fused_per_s: totals.ground_median_abs_fused_per_s,
+        ground_p90_abs_fused_per_s: totals.ground_p90_abs_fused_per_s,
+        ground_moving_fraction: totals.ground_moving_fraction,
+        dominant_mask: totals.dominant_mask,
+        diagnoses: report.diagnoses.into_iter().map(|d| d.code).collect(),
+    })
 }
 
 fn first_line(text: &str) -> String {

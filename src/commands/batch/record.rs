@@ -81,6 +81,21 @@ pub struct FleetEntry {
     pub bad_messages: u64,
     /// Wall time of the run that did the work, seconds.
     pub seconds: f64,
+    /// The `looming quality` figures of the annotated log.
+    pub quality: Option<FleetQuality>,
+}
+
+/// The quality figures of a log that say whether to trust it
+/// (`docs/quality.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FleetQuality {
+    pub trusted_fraction: Option<f64>,
+    pub ground_median_abs_fused_per_s: Option<f64>,
+    pub ground_p90_abs_fused_per_s: Option<f64>,
+    pub ground_moving_fraction: Option<f64>,
+    pub dominant_mask: Option<String>,
+    /// The codes of `looming quality`'s diagnoses (`low_trust`, ...).
+    pub diagnoses: Vec<String>,
 }
 
 /// The record kept beside a log's output.
