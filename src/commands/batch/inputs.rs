@@ -14,18 +14,20 @@ pub struct BatchLog {
 }
 
 /// Every log the inputs name, sorted by output path, duplicates dropped.
-pub fn discover(inputs: &[PathBuf]) -> std::io::Result<Vec<BatchLog>> {
+/// An error names the folder or manifest it came from.
+pub fn discover(inputs: &[PathBuf]) -> Result<Vec<BatchLog>, (PathBuf, std::io::Error)> {
     let mut logs = Vec::new();
     for input in inputs {
+        let named = |error| (input.clone(), error);
         if input.is_dir() {
             let mut found = Vec::new();
-            mcap_files_below(input, &mut found)?;
+            mcap_files_below(input, &mut found).map_err(named)?;
             logs.extend(found.into_iter().map(|path| BatchLog {
                 relative: path.strip_prefix(input).unwrap_or(&path).to_path_buf(),
                 input: path,
             }));
         } else if input.extension().is_some_and(|e| e == "txt") {
-            logs.extend(manifest_entries(input)?);
+            logs.extend(manifest_entries(input).map_err(named)?);
         } else {
             logs.push(single(input));
         }

@@ -83,7 +83,8 @@ pub fn run_batch(
         let path = path.to_path_buf();
         move |source| BatchError::Io { path, source }
     };
-    let mut logs = discover(&options.inputs).map_err(io_error(&options.out_dir))?;
+    let mut logs =
+        discover(&options.inputs).map_err(|(path, source)| BatchError::Io { path, source })?;
     if let Some(shard) = options.shard {
         logs = shard.select(logs);
     }
