@@ -261,6 +261,11 @@ fn a_killed_batch_is_completed_by_the_next_run_without_partial_outputs() {
     // Kill it once the first log is done and before the last is.
     let first_record = out.join("logs/drive-0.mcap.batch.json");
     while !first_record.exists() {
+        let ended = child.try_wait().unwrap();
+        assert!(
+            ended.is_none(),
+            "the batch ended before its first record: {ended:?}"
+        );
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     child.kill().unwrap();

@@ -137,22 +137,32 @@ fn annotate_config(args: &AnnotateArgs) -> Result<AnnotateConfig, Failure> {
     })
 }
 
-/// `looming process`'s configuration.
-pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failure> {
-    let scans = scan_options(&args.scans)?;
+/// What `process` and `batch` share: how logs are read and paired, what is
+/// added to them and how they are written; no input or output yet.
+fn annotation_run(scans: &ScanArgs, annotate: &AnnotateArgs) -> Result<ProcessConfig, Failure> {
     Ok(ProcessConfig {
-        input: args.input.clone(),
-        output: args.output.clone(),
-        scans,
+        input: PathBuf::new(),
+        output: PathBuf::new(),
+        scans: scan_options(scans)?,
         output_options: OutputOptions {
-            compression: args.annotate.compression.into(),
-            force: args.force,
+            compression: annotate.compression.into(),
             ..OutputOptions::default()
         },
-        annotate: annotate_config(&args.annotate)?,
-        replace: args.replace,
-        events_file: args.events.clone(),
+        annotate: annotate_config(annotate)?,
+        replace: false,
+        events_file: None,
     })
+}
+
+/// `looming process`'s configuration.
+pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failure> {
+    let mut config = annotation_run(&args.scans, &args.annotate)?;
+    config.input = args.input.clone();
+    config.output = args.output.clone();
+    config.output_options.force = args.force;
+    config.replace = args.replace;
+    config.events_file = args.events.clone();
+    Ok(config)
 }
 
 /// `looming batch`'s options: `process`'s configuration for every log.
@@ -161,18 +171,7 @@ pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
         return Err(usage("--jobs must be at least 1".into()));
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let process = ProcessConfig {
-        input: PathBuf::new(),
-        output: PathBuf::new(),
-        scans: scan_options(&args.scans)?,
-        output_options: OutputOptions {
-            compression: args.annotate.compression.into(),
-            ..OutputOptions::default()
-        },
-        annotate: annotate_config(&args.annotate)?,
-        replace: false,
-        events_file: None,
-    };
+    let process = annotation_run(&args.scans, &args.annotate)?;
     Ok(BatchOptions {
         inputs: args.inputs.clone(),
         out_dir: args.output.clone().unwrap_or_default(),

@@ -18,18 +18,10 @@ use super::OutputError;
 /// (logs, events files, renders) is written into before it is renamed
 /// onto `path`.
 pub(crate) fn beside(path: &Path) -> std::io::Result<NamedTempFile> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".into());
+    let (dir, prefix) = temp_dir_and_prefix(path);
     std::fs::create_dir_all(&dir)?;
-    let prefix = format!(".{file_name}.");
     let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(".tmp");
+    builder.prefix(&prefix).suffix(TEMP_SUFFIX);
     // An ordinary file once renamed (temporary files are private, 0600, by
     // default; the umask still applies).
     #[cfg(unix)]
@@ -40,27 +32,35 @@ pub(crate) fn beside(path: &Path) -> std::io::Result<NamedTempFile> {
     builder.tempfile_in(&dir)
 }
 
+/// Ends the name of every temporary file [`beside`] makes.
+const TEMP_SUFFIX: &str = ".tmp";
+
+/// The folder of the temporary files for `path` and how their names start.
+fn temp_dir_and_prefix(path: &Path) -> (PathBuf, String) {
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".into());
+    (dir, format!(".{file_name}."))
+}
+
 /// Remove the temporary files [`beside`] left for `path` by a run that was
 /// killed before it could clean up; the number removed. Only a caller that
 /// knows no other process is writing `path` may call this.
 pub fn remove_stale_temp_files(path: &Path) -> std::io::Result<usize> {
-    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
-        return Ok(0);
-    };
-    let dir = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let prefix = format!(".{}.", name.to_string_lossy());
+    let (dir, prefix) = temp_dir_and_prefix(path);
     let mut removed = 0;
-    let Ok(entries) = std::fs::read_dir(dir) else {
+    let Ok(entries) = std::fs::read_dir(&dir) else {
         return Ok(0);
     };
     for entry in entries {
         let entry = entry?;
         let entry_name = entry.file_name().to_string_lossy().into_owned();
-        if entry_name.starts_with(&prefix) && entry_name.ends_with(".tmp") {
+        if entry_name.starts_with(&prefix) && entry_name.ends_with(TEMP_SUFFIX) {
             std::fs::remove_file(entry.path())?;
             removed += 1;
         }
@@ -232,6 +232,23 @@ mod tests {
         let mut file = AtomicFile::create(target).unwrap();
         file.write_all(bytes).unwrap();
         file
+    }
+
+    #[test]
+    fn stale_temporary_files_of_a_killed_run_are_removed_and_nothing_else() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("log.mcap");
+        // What a killed run leaves: its temporary file, never cleaned up.
+        let (_, stale) = beside(&target).unwrap().keep().unwrap();
+        std::fs::write(dir.path().join("log.mcap.batch.json"), b"{}").unwrap();
+        let (_, other) = beside(&dir.path().join("other.mcap"))
+            .unwrap()
+            .keep()
+            .unwrap();
+        assert_eq!(remove_stale_temp_files(&target).unwrap(), 1);
+        assert!(!stale.exists());
+        assert!(other.exists(), "another file's temporary file stays");
+        assert!(dir.path().join("log.mcap.batch.json").exists());
     }
 
     #[test]

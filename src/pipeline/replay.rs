@@ -11,7 +11,9 @@ use crate::model::ScanPair;
 use crate::pairing::PairingStats;
 use crate::topics::{TopicError, select};
 
-use super::scans::{BadMessages, DecodedCounts, Decoder, PairingStage, ScanOptions};
+use super::scans::{
+    BadMessages, DecodedCounts, Decoder, PairingStage, ReadFailure, ScanOptions, finish_read,
+};
 
 #[derive(Debug, thiserror::Error)]
 pub enum ReplayError {
@@ -80,25 +82,20 @@ pub fn replay_input(
                 }
             }
             Some(Err(bad)) if options.strict => {
-                strict_failure = Some(bad.to_string());
+                strict_failure = Some(bad);
                 return Flow::Break(());
             }
             Some(Err(bad)) => stage.bad.add(bad),
         }
         Flow::Continue(())
     });
-    if let Some(reason) = strict_failure {
-        return Err(ReplayError::Strict(reason));
-    }
-    let read = read.map_err(|error| match error {
-        InputError::BadChunk { .. } if options.strict => ReplayError::Strict(error.to_string()),
-        error => error.into(),
-    })?;
-    if options.strict
-        && let Some(reason) = &read.truncated
-    {
-        return Err(ReplayError::Strict(format!("{path}: {reason}")));
-    }
+    let read =
+        finish_read(options.strict, &path, strict_failure, read).map_err(
+            |failure| match failure {
+                ReadFailure::Input(error) => error.into(),
+                ReadFailure::Strict(reason) => ReplayError::Strict(reason),
+            },
+        )?;
     for pair in stage.finish() {
         pairs += 1;
         on_pair(pair);

@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, HashMap};
 
 use crate::decode::{self, DecodeLimits};
-use crate::input::{Catalog, InputOptions};
+use crate::input::{Catalog, InputError, InputOptions, ReadReport};
 use crate::model::{Decoded, ScanPair, format_log_time};
 use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
 use crate::topics::{Role, SelectedChannel, TopicOverrides, TopicSelection};
@@ -62,6 +62,35 @@ pub struct DecodedCounts {
 }
 
 const BAD_MESSAGE_EXAMPLES: usize = 20;
+
+/// How a read ended short of a report.
+#[derive(Debug)]
+pub(crate) enum ReadFailure {
+    Input(InputError),
+    /// `strict`: a bad message, a bad chunk or a truncated file.
+    Strict(String),
+}
+
+/// The end of a read: under `strict`, the bad message that stopped it
+/// (`strict_failure`), a bad chunk CRC and a truncated file are failures.
+pub(crate) fn finish_read(
+    strict: bool,
+    file_name: &str,
+    strict_failure: Option<BadMessage>,
+    result: Result<ReadReport, InputError>,
+) -> Result<ReadReport, ReadFailure> {
+    if let Some(bad) = strict_failure {
+        return Err(ReadFailure::Strict(bad.to_string()));
+    }
+    let report = result.map_err(|error| match error {
+        InputError::BadChunk { .. } if strict => ReadFailure::Strict(error.to_string()),
+        error => ReadFailure::Input(error),
+    })?;
+    match &report.truncated {
+        Some(reason) if strict => Err(ReadFailure::Strict(format!("{file_name}: {reason}"))),
+        _ => Ok(report),
+    }
+}
 
 /// A decoded message: its log time and what it holds.
 pub(crate) type DecodeResult = Result<(u64, Decoded), BadMessage>;

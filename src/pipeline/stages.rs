@@ -10,15 +10,16 @@ use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
 use crate::annotate::{AnnotateStats, Annotator, OwnMessage, channel_specs};
 use crate::budget::{ByteBudget, Ticket};
 use crate::events::NearMissEvent;
-use crate::input::{
-    Catalog, CopiedRecord, CopyEvent, Flow, InputError, InputFile, InputRecord, ReadReport,
-};
+use crate::input::{Catalog, CopiedRecord, CopyEvent, Flow, InputFile, InputRecord, ReadReport};
 use crate::model::{Decoded, ScanPair};
 use crate::output::{Copied, OutputWriter, WriteMode};
 use crate::topics::TopicSelection;
 
 use super::replace::without_our_channels;
-use super::scans::{BadMessage, BadMessages, DecodeResult, DecodedCounts, Decoder, PairingStage};
+use super::scans::{
+    BadMessage, BadMessages, DecodeResult, DecodedCounts, Decoder, PairingStage, ReadFailure,
+    finish_read,
+};
 use super::summary::RUN_METADATA_NAME;
 use super::{ProcessConfig, ProcessError, ProgressSink};
 use crate::pairing::PairingStats;
@@ -170,21 +171,16 @@ fn read_and_decode(
             input.read_records(config.scans.strict, &mut |record| stage.record(record))
         }
     };
-    if let Some(bad) = stage.strict_failure {
-        return Err(ProcessError::Strict(bad.to_string()));
-    }
-    let report = result.map_err(|error| match error {
-        InputError::BadChunk { .. } if config.scans.strict => {
-            ProcessError::Strict(error.to_string())
-        }
-        error => error.into(),
-    })?;
-    if config.scans.strict
-        && let Some(reason) = &report.truncated
-    {
-        return Err(ProcessError::Strict(format!("{file_name}: {reason}")));
-    }
-    Ok(report)
+    finish_read(
+        config.scans.strict,
+        &file_name,
+        stage.strict_failure,
+        result,
+    )
+    .map_err(|failure| match failure {
+        ReadFailure::Input(error) => error.into(),
+        ReadFailure::Strict(reason) => ProcessError::Strict(reason),
+    })
 }
 
 /// Bytes a copied record holds while it waits to be written.

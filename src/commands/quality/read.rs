@@ -62,22 +62,19 @@ pub fn read_quality(path: &Path) -> Result<QualityReport, QualityError> {
         .values()
         .find(|c| c.topic == EVENTS_TOPIC)
         .map(|c| c.id);
-    // Both callbacks add to the builder, one at a time.
-    let builder = std::cell::RefCell::new(Builder::default());
+    let mut builder = Builder::default();
+    let mut events = 0u64;
     read_json_channel(
         &input,
         pairs_channel,
-        &mut |pair: PairMessage| builder.borrow_mut().add(pair),
-        &mut |channel| {
-            if Some(channel) == events_channel {
-                builder.borrow_mut().count_event();
-            }
-        },
+        &mut |pair: PairMessage| builder.add(pair),
+        &mut |channel| events += u64::from(Some(channel) == events_channel),
     )?
     .map_err(|bad| QualityError::BadRecord {
         path: name.clone(),
         log_time_ns: bad.log_time_ns,
         reason: bad.reason,
     })?;
-    Ok(builder.into_inner().finish(name))
+    builder.count_events(events);
+    Ok(builder.finish(name))
 }

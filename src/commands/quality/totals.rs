@@ -76,9 +76,9 @@ pub(super) struct Builder {
 }
 
 impl Builder {
-    /// One `/looming/events` message.
-    pub(super) fn count_event(&mut self) {
-        self.events += 1;
+    /// `/looming/events` messages read.
+    pub(super) fn count_events(&mut self, events: u64) {
+        self.events += events;
     }
 
     /// One `/looming/pairs` message: its scan line, and its figures summed.
