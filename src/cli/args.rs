@@ -359,7 +359,7 @@ pub(crate) struct BatchArgs {
     pub(crate) output: Option<PathBuf>,
     /// Only rebuild OUT_DIR's fleet files from its logs' records: after
     /// sharded runs (which write no fleet files), or runs on other machines.
-    #[arg(long, value_name = "OUT_DIR", conflicts_with_all = ["inputs", "output", "shard", "force"])]
+    #[arg(long, value_name = "OUT_DIR", conflicts_with_all = ["inputs", "output", "shard", "force", "only", "list"])]
     pub(crate) merge_only: Option<PathBuf>,
     /// Logs processed at once [default: half the cores, at least 1: the
     /// engine uses every core inside a log].
@@ -369,6 +369,15 @@ pub(crate) struct BatchArgs {
     /// e.g. from a Kubernetes Indexed Job's JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
     pub(crate) shard: Option<looming::commands::batch::Shard>,
+    /// Run only the log with this output path (relative to OUT_DIR/logs/, as
+    /// --list prints it); repeatable. Writes no fleet files, as a shard: what
+    /// a distributed driver (python/looming_fleet) runs per task.
+    #[arg(long, value_name = "RELATIVE")]
+    pub(crate) only: Vec<PathBuf>,
+    /// Print the logs the batch would run (after --shard and --only), one
+    /// JSON object per line ({"relative", "input", "output"}), and exit.
+    #[arg(long)]
+    pub(crate) list: bool,
     /// Redo every log, even those whose output is up to date.
     #[arg(long)]
     pub(crate) force: bool,

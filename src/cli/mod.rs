@@ -98,15 +98,40 @@ fn batch(args: BatchArgs) -> Result<(), Failure> {
         return failed_logs(records.iter(), out_dir);
     }
     let options = resolve::batch_options(&args)?;
+    if args.list {
+        return list_batch(&options);
+    }
     let bar = report::BatchBar::new(args.quiet);
     let outcomes = run_batch(&options, &bar);
     bar.bar.finish_and_clear();
-    let outcomes = outcomes?;
+    let outcomes = outcomes.map_err(batch_failure)?;
     if !args.quiet {
         eprint!("{}", report::batch_summary(&outcomes, &options));
     }
     let records: Vec<&LogRecord> = outcomes.iter().map(|o| &o.record).collect();
     failed_logs(records.into_iter(), &options.out_dir)
+}
+
+/// Exit code 2 for a usage error (an --only that names no log), else 1.
+fn batch_failure(error: looming::commands::batch::BatchError) -> Failure {
+    let code = if error.is_usage() { 2 } else { 1 };
+    Failure::with_code(error, code)
+}
+
+/// `batch --list`: the logs, one JSON object per line on stdout.
+fn list_batch(options: &looming::commands::batch::BatchOptions) -> Result<(), Failure> {
+    use looming::commands::batch::{output_path, plan};
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    for log in plan(options).map_err(batch_failure)? {
+        let line = serde_json::json!({
+            "relative": log.relative,
+            "input": log.input,
+            "output": output_path(&options.out_dir, &log),
+        });
+        writeln!(stdout, "{line}").map_err(anyhow::Error::from)?;
+    }
+    Ok(())
 }
 
 /// Exit code 1 when any log failed.

@@ -177,6 +177,7 @@ pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
         out_dir: args.output.clone().unwrap_or_default(),
         jobs: args.jobs.unwrap_or((cores / 2).max(1)),
         shard: args.shard,
+        only: args.only.clone(),
         force: args.force,
         process,
     })

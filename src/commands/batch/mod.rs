@@ -34,6 +34,9 @@ pub struct BatchOptions {
     /// Logs processed at once.
     pub jobs: usize,
     pub shard: Option<Shard>,
+    /// Run only these logs (output paths relative to `OUT_DIR/logs/`); like
+    /// a shard, such a run writes no fleet files.
+    pub only: Vec<PathBuf>,
     /// Redo every log, records or not.
     pub force: bool,
     /// `process`'s configuration for every log (its input and output are
@@ -64,6 +67,43 @@ pub enum BatchError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error("no input log has the output path {relative} (see --list)")]
+    NotAnInput { relative: PathBuf },
+}
+
+impl BatchError {
+    /// A usage error (exit code 2 by the CLI's convention).
+    pub fn is_usage(&self) -> bool {
+        matches!(self, BatchError::NotAnInput { .. })
+    }
+}
+
+/// The logs a batch runs on: its inputs' logs, then its shard's share, then
+/// those `only` names.
+pub fn plan(options: &BatchOptions) -> Result<Vec<BatchLog>, BatchError> {
+    let mut logs =
+        discover(&options.inputs).map_err(|(path, source)| BatchError::Io { path, source })?;
+    if let Some(shard) = options.shard {
+        logs = shard.select(logs);
+    }
+    if let Some(missing) = options
+        .only
+        .iter()
+        .find(|wanted| !logs.iter().any(|log| &log.relative == *wanted))
+    {
+        return Err(BatchError::NotAnInput {
+            relative: missing.clone(),
+        });
+    }
+    if !options.only.is_empty() {
+        logs.retain(|log| options.only.contains(&log.relative));
+    }
+    Ok(logs)
+}
+
+/// Where a log's output goes.
+pub fn output_path(out_dir: &Path, log: &BatchLog) -> PathBuf {
+    output_paths(out_dir, log).0
 }
 
 /// Hears how a batch goes (from its worker threads).
@@ -83,11 +123,7 @@ pub fn run_batch(
         let path = path.to_path_buf();
         move |source| BatchError::Io { path, source }
     };
-    let mut logs =
-        discover(&options.inputs).map_err(|(path, source)| BatchError::Io { path, source })?;
-    if let Some(shard) = options.shard {
-        logs = shard.select(logs);
-    }
+    let logs = plan(options)?;
     progress.start(logs.len());
     let config_crc32 = config_fingerprint(&options.process);
     let next = AtomicUsize::new(0);
@@ -113,7 +149,7 @@ pub fn run_batch(
         .collect();
     // A shard sees only its logs: the fleet files come from `merge_records`
     // once every shard is done.
-    if options.shard.is_none() {
+    if options.shard.is_none() && options.only.is_empty() {
         let records: Vec<LogRecord> = outcomes.iter().map(|o| o.record.clone()).collect();
         fleet::write_fleet_files(&options.out_dir, &records).map_err(io_error(&options.out_dir))?;
     }
