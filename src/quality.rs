@@ -244,6 +244,11 @@ pub struct PairQuality {
     pub ego_velocity: bool,
     /// Range noise (1 sigma) the engine used per ring (beam, lowest first), m.
     pub range_noise_m_per_ring: Vec<f32>,
+    /// The looming of the strongest approach in the ego path, 1/s: the
+    /// event detector's `path_peak_looming` (set by the annotation stage;
+    /// absent where too few cells qualify, and in logs written before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path_peak_looming_per_s: Option<f64>,
     /// Range offset of each ring's laser the engine estimated and took out,
     /// m (all zero when it found none; empty in logs written before it).
     #[serde(default)]
@@ -340,6 +345,7 @@ impl PairQuality {
             threat_cells: threat,
             ego_velocity: ego,
             range_noise_m_per_ring: looming.range_noise_m_per_row.clone(),
+            path_peak_looming_per_s: None,
             range_offset_m_per_ring: looming.range_bias_m_per_row.clone(),
         }
     }

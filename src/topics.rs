@@ -72,7 +72,9 @@ pub struct SelectedChannel {
 /// The topics chosen for one run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct TopicSelection {
-    pub lidar: SelectedChannel,
+    /// `None` only when a log without LiDAR is copied through
+    /// (`NoLidarPolicy::Copy`): [`select`] always chooses one.
+    pub lidar: Option<SelectedChannel>,
     pub imu: Option<SelectedChannel>,
     pub velocity: Option<SelectedChannel>,
     /// Every `/tf` and `/tf_static` channel.
@@ -80,9 +82,20 @@ pub struct TopicSelection {
 }
 
 impl TopicSelection {
+    /// No channel at all: a log copied through, nothing decoded.
+    pub fn none() -> Self {
+        Self {
+            lidar: None,
+            imu: None,
+            velocity: None,
+            tf: Vec::new(),
+        }
+    }
+
     /// All selected channels.
     pub fn all(&self) -> impl Iterator<Item = &SelectedChannel> {
-        std::iter::once(&self.lidar)
+        self.lidar
+            .iter()
             .chain(&self.imu)
             .chain(&self.velocity)
             .chain(&self.tf)
@@ -167,7 +180,7 @@ pub fn select(catalog: &Catalog, overrides: &TopicOverrides) -> Result<TopicSele
         .cloned()
         .collect();
     Ok(TopicSelection {
-        lidar,
+        lidar: Some(lidar),
         imu,
         velocity,
         tf,

@@ -183,6 +183,7 @@ fn assert_every_looming_channel_present(contents: &FileContents) {
         "/looming/image/disagreement",
         "/looming/events",
         "/looming/log",
+        "/looming/near_misses",
     ] {
         assert!(topics.contains(&topic), "{topic} missing: {topics:?}");
     }
@@ -420,6 +421,43 @@ fn assert_event_valid_and_same_in_file_and_log(contents: &FileContents, events_p
             .unwrap()
             .starts_with("near miss #1: min time to contact")
     );
+    assert_near_miss_span(contents, &event_json);
+}
+
+/// `/looming/near_misses`: the event as a `foxglove.Event`, its span and
+/// figures those of the `/looming/events` message.
+fn assert_near_miss_span(contents: &FileContents, event_json: &serde_json::Value) {
+    let spans = contents.topic_messages("/looming/near_misses");
+    assert_eq!(spans.len(), 1);
+    assert_eq!(
+        Some(spans[0].log_time),
+        event_json["start_log_time_ns"].as_u64()
+    );
+    let span = decode(contents, spans[0]);
+    let time_ns = |name: &str| {
+        let ts = field(&span, name);
+        let ts = ts.as_message().unwrap();
+        field(ts, "seconds").as_i64().unwrap() * 1_000_000_000
+            + i64::from(field(ts, "nanos").as_i32().unwrap())
+    };
+    assert_eq!(Some(time_ns("start_time")), event_json["start_ns"].as_i64());
+    assert_eq!(Some(time_ns("end_time")), event_json["end_ns"].as_i64());
+    let metadata: BTreeMap<String, String> = field(&span, "metadata")
+        .as_list()
+        .unwrap()
+        .iter()
+        .map(|pair| {
+            let pair = pair.as_message().unwrap();
+            let text = |name| field(pair, name).as_str().unwrap().to_owned();
+            (text("key"), text("value"))
+        })
+        .collect();
+    assert_eq!(metadata["kind"], "near_miss");
+    assert_eq!(metadata["event_id"], event_json["id"].to_string());
+    let ttc: f64 = metadata["min_time_to_contact_s"].parse().unwrap();
+    let expected = event_json["min_time_to_contact_s"].as_f64().unwrap();
+    assert!((ttc - expected).abs() <= 5e-4, "{ttc} vs {expected}");
+    assert_eq!(metadata["moving"], event_json["moving"].to_string());
 }
 
 #[test]

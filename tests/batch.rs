@@ -73,10 +73,16 @@ fn entry<'a>(entries: &'a [serde_json::Value], log: &str) -> &'a serde_json::Val
 }
 
 fn fleet_files(out: &Path) -> Vec<Vec<u8>> {
-    ["fleet.json", "near_misses.jsonl", "near_misses.csv"]
-        .iter()
-        .map(|f| std::fs::read(out.join(f)).unwrap())
-        .collect()
+    [
+        "fleet.json",
+        "near_misses.jsonl",
+        "near_misses.csv",
+        "near_miss_events.jsonl",
+        "report.html",
+    ]
+    .iter()
+    .map(|f| std::fs::read(out.join(f)).unwrap())
+    .collect()
 }
 
 #[test]
@@ -135,6 +141,84 @@ fn a_fleet_gets_a_status_per_log_and_its_near_misses_ranked() {
     assert!(ttc(&ranked[0]) <= ttc(&ranked[1]));
     let csv = std::fs::read_to_string(out.join("near_misses.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert_pictures_exist(&out, &ranked);
+    assert_foxglove_events(&out, &ranked);
+    assert_report(&out);
+}
+
+/// Each ranked near miss names its two pictures, relative to OUT_DIR, and
+/// they are PNG images of its log.
+fn assert_pictures_exist(out: &Path, ranked: &[serde_json::Value]) {
+    for near_miss in ranked {
+        let log = Path::new(near_miss["log"].as_str().unwrap());
+        let stem = log.file_name().unwrap().to_str().unwrap();
+        for key in ["range_picture", "top_picture"] {
+            let relative = near_miss[key].as_str().unwrap();
+            assert!(
+                relative.starts_with("logs/day1/") && relative.contains(stem),
+                "{relative}"
+            );
+            let png = image::open(out.join(relative)).unwrap_or_else(|e| panic!("{relative}: {e}"));
+            assert!(png.width() >= 256 && png.height() >= 64, "{relative}");
+        }
+    }
+}
+
+/// `near_miss_events.jsonl`: the ranking as `foxglove.Event` records.
+fn assert_foxglove_events(out: &Path, ranked: &[serde_json::Value]) {
+    let text = std::fs::read_to_string(out.join("near_miss_events.jsonl")).unwrap();
+    let events: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(events.len(), ranked.len());
+    for (event, near_miss) in events.iter().zip(ranked) {
+        let metadata: std::collections::BTreeMap<&str, &str> = event["metadata"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|kv| (kv["key"].as_str().unwrap(), kv["value"].as_str().unwrap()))
+            .collect();
+        assert_eq!(metadata["log"], near_miss["log"].as_str().unwrap());
+        assert_eq!(metadata["rank"], near_miss["rank"].to_string());
+        assert_eq!(metadata["kind"], "near_miss");
+        let seconds = |t: &serde_json::Value| {
+            t["sec"].as_i64().unwrap() as f64 + t["nsec"].as_i64().unwrap() as f64 * 1e-9
+        };
+        assert!(seconds(&event["end_time"]) > seconds(&event["start_time"]));
+    }
+}
+
+/// `report.html`: the ranked near misses with their pictures, a plot per
+/// log with near misses, every log's status; nothing fetched from a network.
+fn assert_report(out: &Path) {
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("Near misses in 6 logs"), "{html}");
+    assert_eq!(html.matches("<img ").count(), 4);
+    assert_eq!(
+        html.matches("<svg ").count(),
+        2,
+        "a plot per log with near misses"
+    );
+    let cut_in = html.find("near-miss-1").unwrap();
+    let crossing = html.find("near-miss-2").unwrap();
+    assert!(html[cut_in..crossing].contains("cut-in.mcap"));
+    assert!(html[crossing..].contains("crossing.mcap"));
+    for status in [
+        "processed",
+        "skipped",
+        "failed",
+        "not an MCAP file",
+        "truncated",
+    ] {
+        assert!(html.contains(status), "{status}");
+    }
+    assert_eq!(
+        html.matches("http://").count(),
+        html.matches("http://www.w3.org/2000/svg").count(),
+        "no address but the SVG namespace"
+    );
+    assert!(!html.contains("https://"));
 }
 
 #[test]
@@ -200,9 +284,11 @@ fn shards_split_the_fleet_and_merge_into_the_single_run_files() {
             .map(|bytes| {
                 let text = String::from_utf8(bytes).unwrap();
                 let text = text.replace(dir.to_str().unwrap(), "OUT");
-                let lines = text
-                    .lines()
-                    .filter(|l| !l.trim_start().starts_with("\"seconds\""));
+                // Each run's seconds: a line of fleet.json, a row of the
+                // report's log table.
+                let lines = text.lines().filter(|l| {
+                    !l.trim_start().starts_with("\"seconds\"") && !l.starts_with("<tr><td>")
+                });
                 lines.collect::<Vec<_>>().join("\n")
             })
             .collect()
@@ -284,11 +370,174 @@ fn a_killed_batch_is_completed_by_the_next_run_without_partial_outputs() {
         )),
         "{text}"
     );
-    let leftovers: Vec<String> = std::fs::read_dir(out.join("logs"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|name| name.ends_with(".tmp"))
-        .collect();
+    let mut leftovers = Vec::new();
+    files_below(&out, &mut leftovers);
+    leftovers.retain(|name| name.ends_with(".tmp"));
     assert!(leftovers.is_empty(), "{leftovers:?}");
     assert_eq!(fleet_entries(&out).len(), 6);
+}
+
+fn files_below(dir: &Path, found: &mut Vec<String>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            files_below(&path, found);
+        } else {
+            found.push(path.display().to_string());
+        }
+    }
+}
+
+#[test]
+fn list_names_the_logs_and_only_runs_some_of_them() {
+    let dir = scratch("batch-only");
+    let input = fleet(&dir);
+    let out = dir.join("out");
+    let listed = batch(&input, &out, &["--list"]);
+    assert!(listed.status.success(), "{}", stderr(&listed));
+    let logs: Vec<serde_json::Value> = String::from_utf8(listed.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(logs.len(), 6);
+    assert_eq!(logs[0]["relative"], "day1/crossing.mcap");
+    assert!(!out.exists(), "--list writes nothing");
+    let run = batch(
+        &input,
+        &out,
+        &["--only", "day1/cut-in.mcap", "--only", "safe.mcap"],
+    );
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert!(out.join("logs/day1/cut-in.mcap.batch.json").exists());
+    assert!(out.join("logs/safe.mcap.batch.json").exists());
+    assert!(!out.join("logs/day1/crossing.mcap").exists());
+    assert!(
+        !out.join("fleet.json").exists(),
+        "like a shard: no fleet files"
+    );
+    let merged = looming(&["batch", "--merge-only", out.to_str().unwrap()]);
+    assert!(merged.status.success(), "{}", stderr(&merged));
+    assert_eq!(fleet_entries(&out).len(), 2);
+    let wrong = batch(&input, &out, &["--only", "nope.mcap"]);
+    assert_eq!(wrong.status.code(), Some(2));
+    assert!(stderr(&wrong).contains("nope.mcap"), "{}", stderr(&wrong));
+}
+
+/// The Chromium the report test drives: `$LOOMING_CHROMIUM`, else Debian's.
+fn chromium() -> Option<PathBuf> {
+    std::env::var_os("LOOMING_CHROMIUM")
+        .map(PathBuf::from)
+        .or_else(|| Some(PathBuf::from("/usr/bin/chromium")))
+        .filter(|path| path.exists())
+}
+
+/// Run headless Chromium on `page` with `args`, killed after a minute.
+fn run_chromium(
+    browser: &Path,
+    profile: &Path,
+    args: &[&str],
+    page: &Path,
+) -> std::process::Output {
+    let mut child = std::process::Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            &format!("--user-data-dir={}", profile.display()),
+        ])
+        .args(args)
+        .arg(format!("file://{}", page.display()))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > std::time::Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("chromium did not finish in 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn the_report_opens_in_a_real_browser_with_every_picture() {
+    let Some(browser) = chromium() else {
+        eprintln!("skipped: no Chromium (apt-get install chromium, or set LOOMING_CHROMIUM)");
+        return;
+    };
+    let dir = scratch("batch-browser");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    for name in ["cut-in.mcap", "crossing.mcap", "straight-road.mcap"] {
+        std::fs::copy(sample(name), input.join(name)).unwrap();
+    }
+    let out = dir.join("out");
+    let run = batch(&input, &out, &["-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let page = out.join("report.html");
+    // The page counts, once loaded, the pictures that did not load.
+    let dom = run_chromium(&browser, &dir.join("profile-dom"), &["--dump-dom"], &page);
+    let dom = String::from_utf8_lossy(&dom.stdout);
+    assert!(
+        dom.contains("data-images=\"4\" data-broken-images=\"0\""),
+        "{}",
+        dom.lines()
+            .find(|l| l.contains("<body"))
+            .unwrap_or("no body")
+    );
+    let shot = dir.join("report.png");
+    run_chromium(
+        &browser,
+        &dir.join("profile-shot"),
+        &[
+            "--window-size=1300,1700",
+            &format!("--screenshot={}", shot.display()),
+        ],
+        &page,
+    );
+    let image = image::open(&shot).unwrap().to_rgb8();
+    assert_eq!((image.width(), image.height()), (1300, 1700));
+    // A page with its pictures drawn: the looming colours (red approaching)
+    // are on it, not only text on white.
+    let reddish = image
+        .pixels()
+        .filter(|p| p[0] > 180 && p[1] < 80 && p[2] < 80)
+        .count();
+    assert!(reddish > 100, "{reddish} red pixels in {}", shot.display());
+}
+
+#[test]
+fn with_if_no_lidar_copy_a_log_without_lidar_is_copied_and_still_skipped() {
+    let dir = scratch("batch-copy");
+    let input = fleet(&dir);
+    let out = dir.join("out");
+    let run = batch(
+        &input,
+        &out,
+        &["--if-no-lidar", "copy", "--only", "no-lidar.mcap"],
+    );
+    assert!(run.status.success(), "{}", stderr(&run));
+    looming(&["batch", "--merge-only", out.to_str().unwrap()]);
+    let entries = fleet_entries(&out);
+    let no_lidar = entry(&entries, "no-lidar.mcap");
+    assert_eq!(no_lidar["status"], "skipped");
+    assert!(
+        no_lidar["reason"]
+            .as_str()
+            .unwrap()
+            .contains("every record copied"),
+        "{no_lidar}"
+    );
+    let copy = std::fs::read(out.join("logs/no-lidar.mcap")).unwrap();
+    let copied = common::read_all(&copy);
+    assert_eq!(copied.messages.len(), 10);
 }

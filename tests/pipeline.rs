@@ -705,3 +705,62 @@ fn eval_takes_the_pairing_options_of_process() {
     let run = looming(&["eval", log.to_str().unwrap(), "--max-gap", "-1"]);
     assert_eq!(run.status.code(), Some(2));
 }
+
+/// A log with IMU messages, a metadata record and an attachment, and no
+/// LiDAR.
+fn log_without_lidar() -> Vec<u8> {
+    let mut log = looming::testkit::LogBuilder::new(Layout::indexed(), "ros2");
+    log.schema(1, "sensor_msgs/msg/Imu", "ros2msg", b"");
+    log.channel(1, 1, "/imu/data", "cdr");
+    log.schema(2, "std_msgs/msg/String", "ros2msg", b"string data");
+    log.channel(2, 2, "/notes", "cdr");
+    for i in 0..10u64 {
+        let t = 1_000 + i * 10_000_000;
+        log.message(1, i as u32, t, t, &[0; 8]);
+        log.message(2, i as u32, t + 1, t + 1, &[1; 4]);
+    }
+    log.metadata("robot", &[("id", "r2")]);
+    log.attachment("calib.txt", "text/plain", 5_000, b"calibration");
+    log.finish()
+}
+
+/// `process` refuses a log without LiDAR, listing its channels, unless
+/// `--if-no-lidar copy`: then every record is copied through, with the run
+/// record and no channel of ours.
+#[test]
+fn a_log_without_lidar_is_refused_or_copied_through() {
+    let dir = scratch("no-lidar");
+    let input = dir.join("in.mcap");
+    let bytes = log_without_lidar();
+    write(&input, &bytes);
+    let output = dir.join("out.mcap");
+    let refused = looming_process(&input, &output, &[]);
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(stderr(&refused).contains("no LiDAR topic") && stderr(&refused).contains("/notes"));
+    assert!(!output.exists());
+    let copied = looming_process(&input, &output, &["--if-no-lidar", "copy"]);
+    assert!(copied.status.success(), "{}", stderr(&copied));
+    assert!(
+        stderr(&copied).contains("every record copied through"),
+        "{}",
+        stderr(&copied)
+    );
+    let before = read_all(&bytes);
+    let after = read_all(&std::fs::read(&output).unwrap());
+    assert_all_input_messages_copied(&before, &after);
+    assert!(
+        after
+            .channels
+            .values()
+            .all(|c| !c.topic.starts_with("/looming/"))
+    );
+    assert_eq!(after.attachments.len(), 1);
+    let names: Vec<&str> = after.metadata.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["robot", "looming"]);
+    let run = &after.metadata[1].metadata;
+    assert!(
+        run["config"].contains("\"if_no_lidar\":\"copy\""),
+        "{}",
+        run["config"]
+    );
+}

@@ -3,9 +3,9 @@
 //! Pure functions of a scan and its engine result.
 
 use foxglove::messages::{
-    Color, CompressedImage, KeyValuePair, Log, PackedElementField, PointCloud, Pose, Quaternion,
-    SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive, Timestamp, Vector3, log,
-    packed_element_field::NumericType, scene_entity_deletion,
+    Color, CompressedImage, Event, KeyValuePair, Log, PackedElementField, PointCloud, Pose,
+    Quaternion, SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive, Timestamp, Vector3,
+    log, packed_element_field::NumericType, scene_entity_deletion,
 };
 
 use crate::engine::{PairLooming, ThreatLevel};
@@ -413,6 +413,49 @@ pub(crate) fn event_log(event: &NearMissEvent) -> Log {
         file: String::new(),
         line: 0,
     }
+}
+
+/// `/looming/near_misses`: the event as a `foxglove.Event`, the time span a
+/// data platform indexes, from its first hot scan to the end of its last
+/// one's sweep (header stamps, as every message of ours), with its figures
+/// as metadata (`docs/channels.md` lists the keys).
+pub(crate) fn near_miss_event(event: &NearMissEvent) -> Event {
+    Event {
+        start_time: Some(timestamp(event.start_ns)),
+        end_time: Some(timestamp(event.end_ns)),
+        metadata: near_miss_metadata(event)
+            .into_iter()
+            .map(|(key, value)| key_value(key, &value))
+            .collect(),
+    }
+}
+
+/// The keys and values of a near miss's `foxglove.Event` (shared with the
+/// fleet's `near_miss_events.jsonl`).
+pub fn near_miss_metadata(event: &NearMissEvent) -> Vec<(&'static str, String)> {
+    let mut metadata = vec![
+        ("kind", "near_miss".to_owned()),
+        ("event_id", event.id.to_string()),
+        (
+            "min_time_to_contact_s",
+            format!("{:.3}", event.min_time_to_contact_s),
+        ),
+        (
+            "peak_looming_per_s",
+            format!("{:.3}", event.peak_looming_per_s),
+        ),
+        ("range_m", format!("{:.2}", event.peak.range_m)),
+        ("bearing_deg", format!("{:.1}", event.peak.azimuth_deg)),
+        ("moving", event.moving.to_string()),
+        ("frame_id", event.frame_id.clone()),
+        ("start_log_time_ns", event.start_log_time_ns.to_string()),
+        ("end_log_time_ns", event.end_log_time_ns.to_string()),
+        ("peak_log_time_ns", event.peak.log_time_ns.to_string()),
+    ];
+    if let Some(speed) = event.peak.ego_speed_mps {
+        metadata.push(("ego_speed_mps", format!("{speed:.2}")));
+    }
+    metadata
 }
 
 /// One line describing an event, for the log channel and the CLI summary.

@@ -23,7 +23,7 @@ pub use self::foxglove::FieldSet;
 
 pub use self::topics::{
     DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
-    POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
+    NEAR_MISSES_TOPIC, POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
 };
 
 /// Settings of the annotation stage.
@@ -46,9 +46,13 @@ enum Channel {
     ImageDisagreement,
     Events,
     Log,
+    NearMisses,
 }
 
-const CHANNELS: [Channel; 8] = [
+/// How many channels the stage writes.
+const CHANNEL_COUNT: usize = 9;
+
+const CHANNELS: [Channel; CHANNEL_COUNT] = [
     Channel::Points,
     Channel::Disagreement,
     Channel::Threat,
@@ -57,6 +61,7 @@ const CHANNELS: [Channel; 8] = [
     Channel::ImageDisagreement,
     Channel::Events,
     Channel::Log,
+    Channel::NearMisses,
 ];
 
 /// Channel and schema of a Foxglove protobuf message type.
@@ -73,7 +78,7 @@ fn protobuf_spec<T: Encode>(topic: &str) -> OwnChannelSpec {
 
 impl Channel {
     fn spec(self) -> OwnChannelSpec {
-        use ::foxglove::messages::{CompressedImage, Log, PointCloud, SceneUpdate};
+        use ::foxglove::messages::{CompressedImage, Event, Log, PointCloud, SceneUpdate};
         match self {
             Channel::Points => protobuf_spec::<PointCloud>(POINTS_TOPIC),
             Channel::Disagreement => protobuf_spec::<PointCloud>(DISAGREEMENT_TOPIC),
@@ -87,6 +92,7 @@ impl Channel {
                 OwnChannelSpec::json(EVENTS_TOPIC, "looming.NearMissEvent", EVENT_SCHEMA)
             }
             Channel::Log => protobuf_spec::<Log>(LOG_TOPIC),
+            Channel::NearMisses => protobuf_spec::<Event>(NEAR_MISSES_TOPIC),
         }
     }
 }
@@ -134,8 +140,8 @@ pub struct AnnotateStats {
 /// Runs the engine and the event detector over a stream of pairs.
 pub struct Annotator {
     config: AnnotateConfig,
-    channel_ids: [u16; 8],
-    sequences: [u32; 8],
+    channel_ids: [u16; CHANNEL_COUNT],
+    sequences: [u32; CHANNEL_COUNT],
     cache: EngineCache,
     detector: EventDetector,
     events: Vec<NearMissEvent>,
@@ -146,13 +152,13 @@ pub struct Annotator {
 impl Annotator {
     /// `channel_ids`: the ids the writer gave [`channel_specs`], same order.
     pub fn new(config: AnnotateConfig, channel_ids: &[u16]) -> Self {
-        let mut ids = [0; 8];
-        ids.copy_from_slice(&channel_ids[..8]);
+        let mut ids = [0; CHANNEL_COUNT];
+        ids.copy_from_slice(&channel_ids[..CHANNEL_COUNT]);
         Self {
             detector: EventDetector::new(config.events.clone()),
             config,
             channel_ids: ids,
-            sequences: [0; 8],
+            sequences: [0; CHANNEL_COUNT],
             cache: EngineCache::default(),
             events: Vec::new(),
             stats: AnnotateStats::default(),
@@ -200,6 +206,9 @@ impl Annotator {
             looming: &looming,
         });
         self.stats.event_min_cells = self.detector.min_cells_used();
+        if let Some(quality) = &mut self.quality {
+            quality.path_peak_looming_per_s = self.detector.path_peak_looming_per_s();
+        }
         for event in ended {
             self.push_event(event, &mut out);
         }
@@ -278,13 +287,15 @@ impl Annotator {
         }
     }
 
-    /// An event goes out at the log time of its first hot scan, on both the
-    /// events and the log channel.
+    /// An event goes out at the log time of its first hot scan, on the
+    /// events, the log and the near-miss (`foxglove.Event`) channels.
     fn push_event(&mut self, event: NearMissEvent, out: &mut Vec<OwnMessage>) {
         let json = serde_json::to_vec(&event).expect("events always serialise");
         let line = foxglove::event_log(&event).encode_to_vec();
+        let span = foxglove::near_miss_event(&event).encode_to_vec();
         self.push(Channel::Events, event.start_log_time_ns, json, out);
         self.push(Channel::Log, event.start_log_time_ns, line, out);
+        self.push(Channel::NearMisses, event.start_log_time_ns, span, out);
         self.stats.events += 1;
         self.events.push(event);
     }
@@ -326,5 +337,6 @@ mod tests {
         let topics: Vec<String> = channel_specs().into_iter().map(|s| s.topic).collect();
         assert_eq!(topics[0], POINTS_TOPIC);
         assert_eq!(topics[7], LOG_TOPIC);
+        assert_eq!(topics[8], NEAR_MISSES_TOPIC);
     }
 }

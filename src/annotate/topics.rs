@@ -14,6 +14,7 @@ pub const IMAGE_FUSED_TOPIC: &str = "/looming/image/fused";
 pub const IMAGE_DISAGREEMENT_TOPIC: &str = "/looming/image/disagreement";
 pub const EVENTS_TOPIC: &str = "/looming/events";
 pub const LOG_TOPIC: &str = "/looming/log";
+pub const NEAR_MISSES_TOPIC: &str = "/looming/near_misses";
 
 /// A channel written by `looming process` (never an input of it).
 pub fn is_ours(topic: &str) -> bool {
@@ -36,6 +37,7 @@ mod tests {
             IMAGE_DISAGREEMENT_TOPIC,
             EVENTS_TOPIC,
             LOG_TOPIC,
+            NEAR_MISSES_TOPIC,
         ] {
             assert!(is_ours(topic), "{topic}");
         }

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use super::choices::{FieldSet, OutputCompression, RenderChannel, RenderView, SweepDirection};
+use super::choices::{
+    FieldSet, NoLidarPolicy, OutputCompression, RenderChannel, RenderView, SweepDirection,
+};
 
 use super::resolve::{parse_shard, parse_threat_ttc};
 
@@ -341,6 +343,11 @@ pub(crate) struct AnnotateArgs {
     /// Half width of the ego corridor in which near misses are sought, metres.
     #[arg(long, value_name = "METRES", default_value_t = 2.0)]
     pub(crate) corridor_half_width: f64,
+    /// A log with no LiDAR topic: `refuse` it (exit 2, listing its
+    /// channels) or `copy` every record through with the run record and no
+    /// looming channel.
+    #[arg(long, value_enum, value_name = "POLICY", default_value_t = NoLidarPolicy::Refuse)]
+    pub(crate) if_no_lidar: NoLidarPolicy,
 }
 
 #[derive(Debug, Args)]

@@ -76,3 +76,14 @@ choice!(
         Clockwise,
     }
 );
+
+choice!(
+    /// What `process` does with a log without a LiDAR topic.
+    NoLidarPolicy => looming::pipeline::NoLidarPolicy {
+        /// Refuse it (exit 2), listing its channels.
+        Refuse,
+        /// Copy every record through, with the run record and no looming
+        /// channel.
+        Copy,
+    }
+);

@@ -91,7 +91,7 @@ fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
     let _ = writeln!(
         out,
         "  topics        lidar {}, imu {}, velocity {}, tf {}",
-        s.topics.lidar.topic,
+        topic(&s.topics.lidar),
         topic(&s.topics.imu),
         topic(&s.topics.velocity),
         s.topics.tf.len()
@@ -110,8 +110,8 @@ fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
 
 /// How the LiDAR's rings and times were found.
 fn layout_lines(out: &mut String, s: &RunSummary) {
-    if let Some(layout) = &s.pairing.layout {
-        let _ = writeln!(out, "  layout        {}: {layout}", s.topics.lidar.topic);
+    if let (Some(layout), Some(lidar)) = (&s.pairing.layout, &s.topics.lidar) {
+        let _ = writeln!(out, "  layout        {}: {layout}", lidar.topic);
         if s.pairing.layout_kinds.len() > 1 {
             let kinds: Vec<String> = s
                 .pairing

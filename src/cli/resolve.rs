@@ -151,6 +151,7 @@ fn annotation_run(scans: &ScanArgs, annotate: &AnnotateArgs) -> Result<ProcessCo
         annotate: annotate_config(annotate)?,
         replace: false,
         events_file: None,
+        if_no_lidar: annotate.if_no_lidar.into(),
     })
 }
 

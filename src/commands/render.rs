@@ -59,6 +59,9 @@ pub enum RenderAt {
     Time(f64),
     /// 0-based index of the scan pair (as `/looming/pairs` numbers them).
     Frame(u64),
+    /// A log time, ns: the first pair whose current scan was logged at or
+    /// after it (an event's `peak.log_time_ns` names its peak pair).
+    LogTimeNs(u64),
 }
 
 #[derive(Debug, Clone)]
@@ -168,55 +171,123 @@ impl RenderError {
 /// image to `options.output` (a temporary file beside it, renamed when
 /// complete).
 pub fn render(options: &RenderOptions) -> Result<RenderSummary, RenderError> {
-    if let RenderAt::Time(t) = options.at
+    let picture = Picture {
+        at: options.at,
+        channel: options.channel,
+        view: options.view,
+        output: options.output.clone(),
+    };
+    let mut summaries = render_pictures(options, std::slice::from_ref(&picture))?;
+    Ok(summaries.remove(0))
+}
+
+/// One image [`render_pictures`] makes: which pair, what it shows, where it
+/// goes.
+#[derive(Debug, Clone)]
+pub struct Picture {
+    pub at: RenderAt,
+    pub channel: RenderChannel,
+    pub view: RenderView,
+    pub output: PathBuf,
+}
+
+/// Several images of one log from a single replay (the engine runs once per
+/// pair pictured): what `batch` draws for each near miss. The input, scan
+/// options, sizes and `force` come from `options`; its `at`, `channel`,
+/// `view` and `output` are not used. The summaries come in `pictures`' order.
+pub fn render_pictures(
+    options: &RenderOptions,
+    pictures: &[Picture],
+) -> Result<Vec<RenderSummary>, RenderError> {
+    for picture in pictures {
+        check_picture(options, picture)?;
+    }
+    let input = InputFile::open(&options.input, options.scans.input_options.clone())?;
+    let start_ns = input.catalog().start_ns;
+    let wanted: Vec<Wanted> = pictures
+        .iter()
+        .map(|p| Wanted::new(p.at, start_ns))
+        .collect();
+    // Each picture's pair, as an index into `pairs` (a pair two pictures
+    // share is kept once).
+    let mut chosen: Vec<Option<usize>> = vec![None; pictures.len()];
+    let mut pairs: Vec<ScanPair> = Vec::new();
+    let mut seen = 0u64;
+    // The callback API reads the whole log; pairs after the chosen ones are
+    // only counted.
+    replay_input(&input, &options.scans, &mut |_| {}, &mut |pair| {
+        seen += 1;
+        let mut kept = None;
+        for (slot, want) in chosen.iter_mut().zip(&wanted) {
+            if slot.is_none() && want.matches(&pair) {
+                *slot = Some(*kept.get_or_insert(pairs.len()));
+            }
+        }
+        if kept.is_some() {
+            pairs.push(pair);
+        }
+    })?;
+    let mut computed: Vec<Option<PairLooming>> = vec![None; pairs.len()];
+    let mut summaries = Vec::with_capacity(pictures.len());
+    for ((picture, want), slot) in pictures.iter().zip(&wanted).zip(&chosen) {
+        let Some(index) = *slot else {
+            return Err(RenderError::NotFound {
+                path: options.input.clone(),
+                at: want.describe(),
+                pairs: seen,
+            });
+        };
+        let pair = &pairs[index];
+        if computed[index].is_none() {
+            computed[index] = engine::compute(pair, &EngineConfig::default());
+        }
+        let looming = computed[index]
+            .as_ref()
+            .ok_or_else(|| RenderError::NoImage {
+                path: options.input.clone(),
+                pair_index: pair.index,
+            })?;
+        summaries.push(draw(options, picture, pair, looming)?);
+    }
+    Ok(summaries)
+}
+
+/// A picture's request, checked before the log is read.
+fn check_picture(options: &RenderOptions, picture: &Picture) -> Result<(), RenderError> {
+    if let RenderAt::Time(t) = picture.at
         && !t.is_finite()
     {
         return Err(RenderError::BadTime(t));
     }
-    if same_file(&options.input, &options.output) {
+    if same_file(&options.input, &picture.output) {
         return Err(RenderError::SameAsInput {
-            path: options.output.clone(),
+            path: picture.output.clone(),
         });
     }
-    if !options.force && options.output.exists() {
+    if !options.force && picture.output.exists() {
         return Err(RenderError::Exists {
-            path: options.output.clone(),
+            path: picture.output.clone(),
         });
     }
-    let input = InputFile::open(&options.input, options.scans.input_options.clone())?;
-    let start_ns = input.catalog().start_ns;
-    let wanted = Wanted::new(options.at, start_ns);
-    let mut chosen: Option<ScanPair> = None;
-    let mut pairs = 0u64;
-    // The callback API reads the whole log; pairs after the chosen one are
-    // only counted (the engine runs once).
-    replay_input(&input, &options.scans, &mut |_| {}, &mut |pair| {
-        pairs += 1;
-        if chosen.is_none() && wanted.matches(&pair) {
-            chosen = Some(pair);
-        }
-    })?;
-    let Some(pair) = chosen else {
-        return Err(RenderError::NotFound {
-            path: options.input.clone(),
-            at: wanted.describe(),
-            pairs,
-        });
-    };
-    let looming =
-        engine::compute(&pair, &EngineConfig::default()).ok_or_else(|| RenderError::NoImage {
-            path: options.input.clone(),
-            pair_index: pair.index,
-        })?;
-    let image = render_image(&pair, &looming, options.channel, options.view, options);
-    write_png(&image, &options.output, options.force)?;
+    Ok(())
+}
+
+/// Draw one picture of its pair and write it.
+fn draw(
+    options: &RenderOptions,
+    picture: &Picture,
+    pair: &ScanPair,
+    looming: &PairLooming,
+) -> Result<RenderSummary, RenderError> {
+    let image = render_image(pair, looming, picture.channel, picture.view, options);
+    write_png(&image, &picture.output, options.force)?;
     Ok(RenderSummary {
         pair_index: pair.index,
         stamp_ns: pair.current.stamp_ns,
         log_time_ns: pair.current_log_time_ns,
         width_px: image.width(),
         height_px: image.height(),
-        output: options.output.clone(),
+        output: picture.output.clone(),
     })
 }
 
@@ -225,12 +296,14 @@ enum Wanted {
     Frame(u64),
     /// Seconds asked for and the log time they give (None: empty log).
     Time(f64, Option<u64>),
+    LogTime(u64),
 }
 
 impl Wanted {
     fn new(at: RenderAt, start_ns: Option<u64>) -> Self {
         match at {
             RenderAt::Frame(index) => Wanted::Frame(index),
+            RenderAt::LogTimeNs(target) => Wanted::LogTime(target),
             RenderAt::Time(t) => Wanted::Time(
                 t,
                 start_ns.map(|start| {
@@ -245,6 +318,7 @@ impl Wanted {
         match *self {
             Wanted::Frame(index) => pair.index == index,
             Wanted::Time(_, target) => target.is_some_and(|t| pair.current_log_time_ns >= t),
+            Wanted::LogTime(target) => pair.current_log_time_ns >= target,
         }
     }
 
@@ -253,6 +327,7 @@ impl Wanted {
             Wanted::Frame(index) => format!("frame {index}"),
             Wanted::Time(t, Some(target)) => format!("time {t} s (log time {target} ns)"),
             Wanted::Time(t, None) => format!("time {t} s"),
+            Wanted::LogTime(target) => format!("log time {target} ns"),
         }
     }
 }

@@ -20,11 +20,11 @@ use std::time::Instant;
 use crate::annotate::AnnotateConfig;
 use crate::input::{InputError, InputFile, ReadMode};
 use crate::output::{OutputError, OutputOptions, WriteMode, check_output_path};
-use crate::topics::{TopicError, select};
+use crate::topics::{TopicError, TopicSelection, select};
 
 pub use replay::{ReplayError, ReplayReport, replay, replay_input};
 pub use scans::{BadMessage, BadMessages, DecodedCounts, ScanOptions};
-pub use summary::{RUN_METADATA_NAME, RunSummary};
+pub use summary::{NO_LIDAR_COPIED, RUN_METADATA_NAME, RunSummary};
 
 use replace::refuse_processed_input;
 use stages::run_once;
@@ -44,6 +44,21 @@ pub struct ProcessConfig {
     pub replace: bool,
     /// Also write the events, ranked, to this JSON file.
     pub events_file: Option<PathBuf>,
+    /// What to do with a log that has no LiDAR topic.
+    pub if_no_lidar: NoLidarPolicy,
+}
+
+/// What `process` does with a log in which no LiDAR topic is found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoLidarPolicy {
+    /// Refuse it ([`ProcessError::Topic`] with [`TopicError::Missing`],
+    /// which lists the log's channels).
+    #[default]
+    Refuse,
+    /// Copy every record through with the run record, and no looming
+    /// channel, so that a fleet's output holds every log.
+    Copy,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -92,12 +107,19 @@ pub fn process(
     }
     let mut restarted_because = None;
     loop {
-        let topics = select(input.catalog(), &config.scans.topics).map_err(|source| {
-            ProcessError::Topic {
-                path: config.input.clone(),
-                source,
+        let topics = match select(input.catalog(), &config.scans.topics) {
+            Ok(topics) => topics,
+            // Nothing to decode: the pass copies every record.
+            Err(TopicError::Missing(_)) if config.if_no_lidar == NoLidarPolicy::Copy => {
+                TopicSelection::none()
             }
-        })?;
+            Err(source) => {
+                return Err(ProcessError::Topic {
+                    path: config.input.clone(),
+                    source,
+                });
+            }
+        };
         let write_mode = choose_write_mode(config, &input);
         let outcome = run_once(config, &input, &topics, &write_mode, progress)?;
         // IndexedReader silently skips messages outside chunks: if the count

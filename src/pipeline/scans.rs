@@ -173,7 +173,9 @@ impl PairingStage {
             has_imu_source: topics.imu.is_some(),
             ..options.pairing.clone()
         });
-        pairer.set_nominal_period_s(catalog.nominal_period_s(topics.lidar.channel_id));
+        if let Some(lidar) = &topics.lidar {
+            pairer.set_nominal_period_s(catalog.nominal_period_s(lidar.channel_id));
+        }
         Self {
             pairer,
             decoded: DecodedCounts::default(),

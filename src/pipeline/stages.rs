@@ -99,26 +99,18 @@ pub(super) fn run_once(
             OutputWriter::create(&config.output, &config.output_options, &catalog)?
         }
     };
-    let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
-    let annotate_channels = channel_specs()
-        .iter()
-        .map(|spec| writer.add_own_channel(spec))
-        .collect::<Result<Vec<u16>, _>>()?;
-    let annotator = Annotator::new(config.annotate.clone(), &annotate_channels);
+    // A log copied through for want of a LiDAR gets no channel of ours.
+    let annotation = match topics.lidar {
+        Some(_) => Some(add_own_channels(&mut writer, config)?),
+        None => None,
+    };
     let pairing_stage = PairingStage::new(&config.scans, input.catalog(), topics);
     let (reader_tx, reader_rx) = sync_channel::<FromReader>(STAGE_QUEUE_LEN);
     let (writer_tx, writer_rx) = sync_channel::<ToWriter>(STAGE_QUEUE_LEN);
     std::thread::scope(|scope| {
         let reader = scope.spawn(|| read_and_decode(config, input, topics, write_mode, reader_tx));
-        let pairing = scope.spawn(move || {
-            pair_scans(
-                pairing_stage,
-                annotator,
-                pairs_channel,
-                reader_rx,
-                writer_tx,
-            )
-        });
+        let pairing =
+            scope.spawn(move || pair_scans(pairing_stage, annotation, reader_rx, writer_tx));
         let written = write_all(
             &mut writer,
             writer_rx,
@@ -141,6 +133,27 @@ pub(super) fn run_once(
             summary_counts: counts,
             pairing,
         })
+    })
+}
+
+/// Our channels in the output, and the annotator that fills them.
+struct Annotation {
+    annotator: Annotator,
+    pairs_channel: u16,
+}
+
+fn add_own_channels(
+    writer: &mut OutputWriter,
+    config: &ProcessConfig,
+) -> Result<Annotation, ProcessError> {
+    let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
+    let annotate_channels = channel_specs()
+        .iter()
+        .map(|spec| writer.add_own_channel(spec))
+        .collect::<Result<Vec<u16>, _>>()?;
+    Ok(Annotation {
+        annotator: Annotator::new(config.annotate.clone(), &annotate_channels),
+        pairs_channel,
     })
 }
 
@@ -278,11 +291,10 @@ pub(super) struct PairingOutcome {
 }
 
 /// Stage 2: feed the pairer, pass every record on, add `/looming/pairs` and
-/// the annotation of every pair.
+/// the annotation of every pair (without `annotation`, only pass records on).
 fn pair_scans(
     mut stage: PairingStage,
-    mut annotator: Annotator,
-    pairs_channel: u16,
+    mut annotation: Option<Annotation>,
     rx: Receiver<FromReader>,
     tx: SyncSender<ToWriter>,
 ) -> PairingOutcome {
@@ -310,73 +322,67 @@ fn pair_scans(
                 decoded,
             } => stage.push(log_time_ns, decoded),
         };
-        if !emit(
-            pairs,
-            &mut annotator,
-            pairs_channel,
-            &mut pairs_written,
-            &tx,
-        ) {
+        if let Some(annotation) = &mut annotation
+            && !annotation.emit(pairs, &mut pairs_written, &tx)
+        {
             break;
         }
     }
     let pairs = stage.finish();
-    if emit(
-        pairs,
-        &mut annotator,
-        pairs_channel,
-        &mut pairs_written,
-        &tx,
-    ) {
-        for message in annotator.finish() {
+    if let Some(annotation) = &mut annotation
+        && annotation.emit(pairs, &mut pairs_written, &tx)
+    {
+        for message in annotation.annotator.finish() {
             if tx.send(ToWriter::Own(message)).is_err() {
                 break;
             }
         }
     }
+    let annotator = annotation.as_ref().map(|a| &a.annotator);
     PairingOutcome {
         stats: stage.stats().clone(),
         decoded: stage.decoded,
         pairs_written,
         bad: stage.bad,
         warnings: stage.warnings,
-        annotation: annotator.stats().clone(),
-        events: annotator.events().to_vec(),
+        annotation: annotator.map(|a| a.stats().clone()).unwrap_or_default(),
+        events: annotator.map(|a| a.events().to_vec()).unwrap_or_default(),
     }
 }
 
-/// Send the pairer's events on, annotated; false when the writer has gone.
-fn emit(
-    pairs: Vec<ScanPair>,
-    annotator: &mut Annotator,
-    pairs_channel: u16,
-    pairs_written: &mut u64,
-    tx: &SyncSender<ToWriter>,
-) -> bool {
-    for pair in pairs {
-        // The pair's quality figures come from its annotation; its
-        // record still goes out first.
-        let annotation = annotator.annotate(&pair);
-        let mut record = PairRecord::from_pair(&pair);
-        record.quality = annotator.take_quality();
-        let data = serde_json::to_vec(&record).expect("pair records always serialise");
-        let item = ToWriter::Own(OwnMessage {
-            channel_id: pairs_channel,
-            sequence: *pairs_written as u32,
-            log_time_ns: pair.current_log_time_ns,
-            data,
-        });
-        *pairs_written += 1;
-        if tx.send(item).is_err() {
-            return false;
-        }
-        for message in annotation {
-            if tx.send(ToWriter::Own(message)).is_err() {
+impl Annotation {
+    /// Send the pairer's pairs on, annotated; false when the writer has gone.
+    fn emit(
+        &mut self,
+        pairs: Vec<ScanPair>,
+        pairs_written: &mut u64,
+        tx: &SyncSender<ToWriter>,
+    ) -> bool {
+        for pair in pairs {
+            // The pair's quality figures come from its annotation; its
+            // record still goes out first.
+            let annotation = self.annotator.annotate(&pair);
+            let mut record = PairRecord::from_pair(&pair);
+            record.quality = self.annotator.take_quality();
+            let data = serde_json::to_vec(&record).expect("pair records always serialise");
+            let item = ToWriter::Own(OwnMessage {
+                channel_id: self.pairs_channel,
+                sequence: *pairs_written as u32,
+                log_time_ns: pair.current_log_time_ns,
+                data,
+            });
+            *pairs_written += 1;
+            if tx.send(item).is_err() {
                 return false;
             }
+            for message in annotation {
+                if tx.send(ToWriter::Own(message)).is_err() {
+                    return false;
+                }
+            }
         }
+        true
     }
-    true
 }
 
 /// Stage 3 (calling thread): write everything, reporting progress.

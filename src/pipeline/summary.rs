@@ -16,6 +16,10 @@ use super::scans::{BadMessage, DecodedCounts};
 use super::stages::PassOutcome;
 use super::{ProcessConfig, ProcessError};
 
+/// How the summary's warning about a log without LiDAR starts (`batch`
+/// recognises it).
+pub const NO_LIDAR_COPIED: &str = "no LiDAR topic (--if-no-lidar copy)";
+
 /// What a run did, for the one-screen summary and `--json-summary`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RunSummary {
@@ -78,6 +82,11 @@ pub(super) fn finish_run(
     writer.write_metadata(&run_metadata(config, input, &topics, &write_mode, &stats))?;
     let output_bytes = writer.finish()?;
     let mut warnings: Vec<String> = Vec::new();
+    if topics.lidar.is_none() {
+        warnings.push(format!(
+            "{NO_LIDAR_COPIED}: every record copied through, no looming channel written"
+        ));
+    }
     if let ReadMode::Linear { reason } = input.mode() {
         warnings.push(format!("read linearly in file order ({reason})"));
     }
@@ -152,6 +161,7 @@ fn run_metadata(
         "max_points_per_scan": config.scans.decode_limits.max_points,
         "annotate": config.annotate,
         "replace": config.replace,
+        "if_no_lidar": config.if_no_lidar,
     });
     let mut metadata = BTreeMap::new();
     metadata.insert("tool".to_string(), "looming".to_string());

@@ -1,14 +1,16 @@
 //! The fleet files a batch leaves in `OUT_DIR`, rebuilt from every log's
 //! record on each run (so that a re-run with nothing new writes the same
-//! bytes): `fleet.json` (one entry per log) and `near_misses.jsonl` /
+//! bytes): `fleet.json` (one entry per log), `near_misses.jsonl` /
 //! `near_misses.csv` (every event of every log, ranked by minimum time to
-//! contact).
+//! contact), `near_miss_events.jsonl` (the same ranking as `foxglove.Event`
+//! records) and `report.html` (`super::report`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use crate::annotate::foxglove::near_miss_metadata;
 use crate::events::NearMissEvent;
 use crate::output::AtomicFile;
 
@@ -17,6 +19,8 @@ use super::record::{FleetEntry, LogRecord};
 pub const FLEET_JSON: &str = "fleet.json";
 pub const NEAR_MISSES_JSONL: &str = "near_misses.jsonl";
 pub const NEAR_MISSES_CSV: &str = "near_misses.csv";
+pub const NEAR_MISS_EVENTS_JSONL: &str = "near_miss_events.jsonl";
+pub const REPORT_HTML: &str = "report.html";
 
 /// One near miss in the fleet ranking.
 #[derive(Debug, Clone, Serialize)]
@@ -34,43 +38,59 @@ pub struct FleetNearMiss {
     pub bearing_deg: f64,
     pub ego_speed_mps: Option<f64>,
     pub moving: bool,
+    /// The range image and top view of its peak pair, relative to `OUT_DIR`
+    /// (absent beyond a log's first [`super::MAX_PICTURED_EVENTS`]).
+    pub range_picture: Option<PathBuf>,
+    pub top_picture: Option<PathBuf>,
 }
 
 /// Every near miss of `records`, ranked: smallest time to contact first,
 /// ties by log, then start, then event id.
 pub fn ranked_near_misses(records: &[LogRecord]) -> Vec<FleetNearMiss> {
-    let mut all: Vec<(&FleetEntry, &NearMissEvent)> = records
+    ranked_events(records)
+        .into_iter()
+        .enumerate()
+        .map(|(i, (record, event))| {
+            let pictures = record.pictures.iter().find(|p| p.event_id == event.id);
+            FleetNearMiss {
+                rank: i + 1,
+                log: record.entry.input.clone(),
+                output: record.entry.output.clone(),
+                event_id: event.id,
+                start_log_time_ns: event.start_log_time_ns,
+                end_log_time_ns: event.end_log_time_ns,
+                duration_s: event.duration_s,
+                min_time_to_contact_s: event.min_time_to_contact_s,
+                peak_looming_per_s: event.peak_looming_per_s,
+                range_m: event.peak.range_m,
+                bearing_deg: event.peak.azimuth_deg,
+                ego_speed_mps: event.peak.ego_speed_mps,
+                moving: event.moving,
+                range_picture: pictures.map(|p| p.range_png.clone()),
+                top_picture: pictures.map(|p| p.top_png.clone()),
+            }
+        })
+        .collect()
+}
+
+/// Every event of `records` with its log's record, in rank order.
+fn ranked_events(records: &[LogRecord]) -> Vec<(&LogRecord, &NearMissEvent)> {
+    let mut all: Vec<(&LogRecord, &NearMissEvent)> = records
         .iter()
-        .flat_map(|r| r.near_misses.iter().map(move |e| (&r.entry, e)))
+        .flat_map(|r| r.near_misses.iter().map(move |e| (r, e)))
         .collect();
-    all.sort_by(|(la, a), (lb, b)| {
+    all.sort_by(|(ra, a), (rb, b)| {
+        let (la, lb) = (&ra.entry, &rb.entry);
         a.min_time_to_contact_s
             .total_cmp(&b.min_time_to_contact_s)
             .then_with(|| la.input.cmp(&lb.input))
             .then(a.start_ns.cmp(&b.start_ns))
             .then(a.id.cmp(&b.id))
     });
-    all.into_iter()
-        .enumerate()
-        .map(|(i, (log, event))| FleetNearMiss {
-            rank: i + 1,
-            log: log.input.clone(),
-            output: log.output.clone(),
-            event_id: event.id,
-            start_log_time_ns: event.start_log_time_ns,
-            end_log_time_ns: event.end_log_time_ns,
-            duration_s: event.duration_s,
-            min_time_to_contact_s: event.min_time_to_contact_s,
-            peak_looming_per_s: event.peak_looming_per_s,
-            range_m: event.peak.range_m,
-            bearing_deg: event.peak.azimuth_deg,
-            ego_speed_mps: event.peak.ego_speed_mps,
-            moving: event.moving,
-        })
-        .collect()
+    all
 }
 
-/// Write the three fleet files into `out_dir`, each whole or not at all.
+/// Write the fleet files into `out_dir`, each whole or not at all.
 pub fn write_fleet_files(out_dir: &Path, records: &[LogRecord]) -> std::io::Result<()> {
     let entries: Vec<&FleetEntry> = records.iter().map(|r| &r.entry).collect();
     let mut fleet = AtomicFile::create(&out_dir.join(FLEET_JSON))?;
@@ -86,18 +106,56 @@ pub fn write_fleet_files(out_dir: &Path, records: &[LogRecord]) -> std::io::Resu
     let mut csv = AtomicFile::create(&out_dir.join(NEAR_MISSES_CSV))?;
     csv.write_all(csv_text(&near_misses).as_bytes())?;
     csv.commit()?;
+    let mut spans = AtomicFile::create(&out_dir.join(NEAR_MISS_EVENTS_JSONL))?;
+    for (rank, (record, event)) in ranked_events(records).into_iter().enumerate() {
+        serde_json::to_writer(&mut spans, &foxglove_event(rank + 1, record, event))?;
+        spans.write_all(b"\n")?;
+    }
+    spans.commit()?;
+    let mut report = AtomicFile::create(&out_dir.join(REPORT_HTML))?;
+    report.write_all(super::report::report_html(records, &near_misses).as_bytes())?;
+    report.commit()?;
     Ok(())
+}
+
+/// A near miss as a `foxglove.Event` in its JSON form (the schema's field
+/// names, `Timestamp` as `sec` / `nsec`), its metadata that of the event's
+/// `/looming/near_misses` message plus where it is in the fleet.
+fn foxglove_event(rank: usize, record: &LogRecord, event: &NearMissEvent) -> serde_json::Value {
+    let time = |ns: i64| {
+        serde_json::json!({
+            "sec": ns.div_euclid(1_000_000_000),
+            "nsec": ns.rem_euclid(1_000_000_000),
+        })
+    };
+    let mut metadata = vec![
+        ("rank", rank.to_string()),
+        ("log", record.entry.input.display().to_string()),
+    ];
+    if let Some(output) = &record.entry.output {
+        metadata.push(("output", output.display().to_string()));
+    }
+    metadata.extend(near_miss_metadata(event));
+    let metadata: Vec<serde_json::Value> = metadata
+        .into_iter()
+        .map(|(key, value)| serde_json::json!({"key": key, "value": value}))
+        .collect();
+    serde_json::json!({
+        "start_time": time(event.start_ns),
+        "end_time": time(event.end_ns),
+        "metadata": metadata,
+    })
 }
 
 /// The ranking as CSV (paths quoted).
 fn csv_text(near_misses: &[FleetNearMiss]) -> String {
     let mut text = String::from(
-        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving\n",
+        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture\n",
     );
     let quoted = |path: &Path| format!("\"{}\"", path.display().to_string().replace('"', "\"\""));
     for n in near_misses {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{}\n",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{}\n",
             n.rank,
             quoted(&n.log),
             n.output.as_deref().map_or(String::new(), quoted),
@@ -110,7 +168,9 @@ fn csv_text(near_misses: &[FleetNearMiss]) -> String {
             n.range_m,
             n.bearing_deg,
             n.ego_speed_mps.map_or(String::new(), |v| format!("{v:.2}")),
-            n.moving
+            n.moving,
+            n.range_picture.as_deref().map_or(String::new(), quoted),
+            n.top_picture.as_deref().map_or(String::new(), quoted),
         ));
     }
     text

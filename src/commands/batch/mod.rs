@@ -8,19 +8,28 @@
 
 mod fleet;
 mod inputs;
+mod pictures;
+mod plot;
 mod record;
+mod report;
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-pub use fleet::{FLEET_JSON, FleetNearMiss, NEAR_MISSES_CSV, NEAR_MISSES_JSONL};
+pub use fleet::{
+    FLEET_JSON, FleetNearMiss, NEAR_MISS_EVENTS_JSONL, NEAR_MISSES_CSV, NEAR_MISSES_JSONL,
+    REPORT_HTML,
+};
 pub use inputs::{BatchLog, Shard, discover};
-pub use record::{FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus};
+pub use pictures::MAX_PICTURED_EVENTS;
+pub use record::{
+    EventPictures, FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus, PeakSeries,
+};
 
 use crate::output::remove_stale_temp_files;
-use crate::pipeline::{NoProgress, ProcessConfig, ProcessError, process};
+use crate::pipeline::{NO_LIDAR_COPIED, NoProgress, ProcessConfig, ProcessError, process};
 use crate::topics::TopicError;
 
 /// What a log's record file adds to its output's name.
@@ -223,7 +232,7 @@ fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutc
     };
     if !options.force
         && let Some(record) = LogRecord::read(&record_path)
-        && record.holds_for(&fingerprint, config_crc32)
+        && record.holds_for(&fingerprint, config_crc32, &options.out_dir)
     {
         return LogOutcome {
             record,
@@ -259,6 +268,8 @@ fn unreadable(log: &BatchLog, reason: &str) -> LogOutcome {
             config_crc32: 0,
             entry: entry(log, None, LogStatus::Failed, Some(reason.to_owned()), 0.0),
             near_misses: Vec::new(),
+            pictures: Vec::new(),
+            peak_series: None,
         },
         action: RunAction::Ran,
     }
@@ -285,7 +296,9 @@ fn entry(
     }
 }
 
-/// Run `process` on the log into `output`.
+/// Run `process` on the log into `output`; for a processed log, its
+/// quality figures and, when it has near misses, their pictures and its
+/// path peak over time.
 fn process_log(
     options: &BatchOptions,
     log: &BatchLog,
@@ -301,70 +314,95 @@ fn process_log(
     // from an interrupted run.
     config.output_options.force = true;
     let result = process(&config, &NoProgress);
-    let seconds = (started.elapsed().as_secs_f64() * 1000.0).round() / 1000.0;
-    let (entry, near_misses) = match result {
+    let mut record = LogRecord {
+        input: fingerprint,
+        config_crc32,
+        entry: entry(log, None, LogStatus::Failed, None, 0.0),
+        near_misses: Vec::new(),
+        pictures: Vec::new(),
+        peak_series: None,
+    };
+    match result {
+        // `--if-no-lidar copy`: the log is copied, still skipped by policy.
+        Ok(summary) if summary.topics.lidar.is_none() => {
+            record.entry.status = LogStatus::Skipped;
+            record.entry.output = Some(output.to_path_buf());
+            record.entry.reason = Some(format!("{NO_LIDAR_COPIED}: every record copied"));
+        }
         Ok(summary) => {
-            let mut entry = entry(
-                log,
-                Some(output.to_path_buf()),
-                LogStatus::Processed,
-                None,
-                seconds,
-            );
+            let entry = &mut record.entry;
+            entry.status = LogStatus::Processed;
+            entry.output = Some(output.to_path_buf());
             entry.scans = summary.decoded.scans;
             entry.pairs = summary.pairs_written;
             entry.events = summary.events.len();
             entry.bad_messages = summary.bad_messages;
             // Processed, but only up to where the file ends.
             entry.reason = summary.input_report.truncated.clone();
-            entry.quality = fleet_quality(output);
-            (entry, summary.events)
+            record.near_misses = summary.events;
+            describe_processed(options, log, &config, output, &mut record);
         }
         Err(ProcessError::Topic {
             source: TopicError::Missing(reason),
             ..
-        }) => (
-            entry(
-                log,
-                None,
-                LogStatus::Skipped,
-                Some(first_line(&reason)),
-                seconds,
-            ),
-            Vec::new(),
-        ),
-        Err(error) => (
-            entry(
-                log,
-                None,
-                LogStatus::Failed,
-                Some(error.to_string()),
-                seconds,
-            ),
-            Vec::new(),
-        ),
-    };
-    LogRecord {
-        input: fingerprint,
-        config_crc32,
-        entry,
-        near_misses,
+        }) => {
+            record.entry.status = LogStatus::Skipped;
+            record.entry.reason = Some(first_line(&reason));
+        }
+        Err(error) => record.entry.reason = Some(error.to_string()),
+    }
+    record.entry.seconds = (started.elapsed().as_secs_f64() * 1000.0).round() / 1000.0;
+    record
+}
+
+/// What the fleet files show of a processed log beyond its summary: the
+/// quality figures and, for near misses, the series and pictures. A picture
+/// that cannot be drawn is said in the reason; the log stays processed.
+fn describe_processed(
+    options: &BatchOptions,
+    log: &BatchLog,
+    config: &ProcessConfig,
+    output: &Path,
+    record: &mut LogRecord,
+) {
+    let report = crate::commands::quality::read_quality(output).ok();
+    let threshold_per_s = 1.0 / config.annotate.events.ttc_threshold_s;
+    if let Some(report) = report {
+        if !record.near_misses.is_empty() {
+            record.peak_series = pictures::peak_series(&report.scans, threshold_per_s);
+        }
+        record.entry.quality = Some(fleet_quality(report));
+    }
+    let drawn = pictures::draw_event_pictures(
+        config,
+        &log.input,
+        &options.out_dir,
+        &log.relative,
+        &record.near_misses,
+    );
+    match drawn {
+        Ok(pictures) => record.pictures = pictures,
+        Err(error) => {
+            let said = format!("pictures not drawn: {error}");
+            record.entry.reason = Some(match record.entry.reason.take() {
+                Some(reason) => format!("{reason}; {said}"),
+                None => said,
+            });
+        }
     }
 }
 
-/// The quality figures of an annotated log (`None` if it cannot be read
-/// back, which the fleet table then shows).
-fn fleet_quality(output: &Path) -> Option<FleetQuality> {
-    let report = crate::commands::quality::read_quality(output).ok()?;
+/// The quality figures of an annotated log that the fleet table shows.
+fn fleet_quality(report: crate::commands::quality::QualityReport) -> FleetQuality {
     let totals = report.totals;
-    Some(FleetQuality {
+    FleetQuality {
         trusted_fraction: totals.trusted_fraction,
         ground_median_abs_fused_per_s: totals.ground_median_abs_fused_per_s,
         ground_p90_abs_fused_per_s: totals.ground_p90_abs_fused_per_s,
         ground_moving_fraction: totals.ground_moving_fraction,
         dominant_mask: totals.dominant_mask,
         diagnoses: report.diagnoses.into_iter().map(|d| d.code).collect(),
-    })
+    }
 }
 
 fn first_line(text: &str) -> String {

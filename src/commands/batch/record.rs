@@ -98,6 +98,30 @@ pub struct FleetQuality {
     pub diagnoses: Vec<String>,
 }
 
+/// The pictures of a near miss's peak pair, paths relative to `OUT_DIR`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventPictures {
+    pub event_id: u32,
+    /// The range image of the fused looming.
+    pub range_png: PathBuf,
+    /// The cloud from above, coloured by threat, with the threat zones.
+    pub top_png: PathBuf,
+}
+
+/// A log's strongest approach in the ego path over time (each pair's
+/// `path_peak_looming_per_s`), for the report's plot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PeakSeries {
+    /// Log time of the first pair, ns: where `time_s` starts.
+    pub start_log_time_ns: u64,
+    /// The event threshold, 1/s (`1 / --threat-ttc`'s event time).
+    pub threshold_per_s: f64,
+    /// Each pair's time after the first, seconds.
+    pub time_s: Vec<f64>,
+    /// Its looming, 1/s (`None`: nothing in the path approaching).
+    pub looming_per_s: Vec<Option<f64>>,
+}
+
 /// The record kept beside a log's output.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LogRecord {
@@ -105,6 +129,12 @@ pub struct LogRecord {
     pub config_crc32: u32,
     pub entry: FleetEntry,
     pub near_misses: Vec<NearMissEvent>,
+    /// The pictures of its near misses (the first [`super::pictures::MAX_PICTURED_EVENTS`]).
+    #[serde(default)]
+    pub pictures: Vec<EventPictures>,
+    /// For a log with near misses, its path peak over time.
+    #[serde(default)]
+    pub peak_series: Option<PeakSeries>,
 }
 
 impl LogRecord {
@@ -130,8 +160,8 @@ impl LogRecord {
     }
 
     /// Still true of `input` under the configuration `config_crc32`, its
-    /// output (when it has one) complete.
-    pub fn holds_for(&self, input: &InputFingerprint, config_crc32: u32) -> bool {
+    /// output (when it has one) and its pictures (below `out_dir`) there.
+    pub fn holds_for(&self, input: &InputFingerprint, config_crc32: u32, out_dir: &Path) -> bool {
         self.input == *input
             && self.config_crc32 == config_crc32
             && self
@@ -139,5 +169,9 @@ impl LogRecord {
                 .output
                 .as_ref()
                 .is_none_or(|output| output.exists())
+            && self
+                .pictures
+                .iter()
+                .all(|p| out_dir.join(&p.range_png).exists() && out_dir.join(&p.top_png).exists())
     }
 }

@@ -8,7 +8,7 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use crate::decode::{self, DecodeLimits};
 use crate::input::{Flow, InputFile, InputOptions, InputRecord};
 use crate::model::{Decoded, StampNs};
-use crate::topics::{TopicOverrides, select};
+use crate::topics::{TopicError, TopicOverrides, select};
 use crate::truth::{self, PointTruth};
 
 use super::{EvalError, ScanTruth, position_key};
@@ -81,7 +81,10 @@ fn read_truth(
             path: name.clone(),
             source,
         })?;
-    let lidar = topics.lidar;
+    let lidar = topics.lidar.ok_or_else(|| EvalError::Topic {
+        path: name.clone(),
+        source: TopicError::Missing("no LiDAR topic".into()),
+    })?;
     let limits = DecodeLimits::default();
     let mut positions: BTreeMap<StampNs, HashMap<[u32; 3], u32>> = BTreeMap::new();
     let mut truths: BTreeMap<StampNs, Vec<PointTruth>> = BTreeMap::new();

@@ -27,6 +27,8 @@ pub struct ScanLine {
     pub median_abs_d_static_per_s: Option<f64>,
     pub moving_fraction: Option<f64>,
     pub threat_cells: Option<u64>,
+    /// Looming of the strongest approach in the ego path, 1/s.
+    pub path_peak_looming_per_s: Option<f64>,
     pub dominant_mask: Option<String>,
 }
 

@@ -217,6 +217,7 @@ fn scan_line(pair: &PairMessage, layout: String) -> ScanLine {
         median_abs_d_static_per_s: q.and_then(|q| q.median_abs_d_static_per_s),
         moving_fraction: q.and_then(|q| q.moving_fraction),
         threat_cells: q.map(|q| q.threat_cells),
+        path_peak_looming_per_s: q.and_then(|q| q.path_peak_looming_per_s),
         dominant_mask: q.and_then(|q| q.masked_cells.dominant().map(|(n, _)| n.to_string())),
     }
 }

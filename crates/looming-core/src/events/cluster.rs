@@ -138,6 +138,33 @@ pub fn hot_clusters(
         .collect()
 }
 
+/// The looming of the strongest approach in the path this pair, 1/s: the
+/// largest looming of a cluster found as [`hot_clusters`] finds them, with
+/// the threshold lowered to a time to contact of [`PATH_PEAK_FLOOR_TTC_S`],
+/// so that it is defined below the event threshold too (the curve a near
+/// miss rises out of) and is a cluster's median, which neither noise nor
+/// edge spikes set; `None` when nothing in the path approaches that fast.
+pub fn path_peak_looming(
+    looming: &PairLooming,
+    scan: &Scan,
+    corridor: &Corridor,
+    config: &EventConfig,
+    min_cells: usize,
+) -> Option<f64> {
+    let floor = EventConfig {
+        ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S.max(config.ttc_threshold_s),
+        ..config.clone()
+    };
+    hot_clusters(looming, scan, corridor, &floor, min_cells)
+        .iter()
+        .map(|cluster| cluster.looming_per_s)
+        .max_by(f64::total_cmp)
+}
+
+/// The slowest approach [`path_peak_looming`] reports: a time to contact of
+/// 10 s (0.1 1/s).
+pub const PATH_PEAK_FLOOR_TTC_S: f64 = 10.0;
+
 /// A static surface facing the sensor within `acos(facing_cos)` looms at
 /// most `|t| / (facing_cos R)` along any ray (`(n . t) / ((n . e) R)`), `t` the
 /// ego velocity: a cluster with no moving cell that reads far more is an

@@ -15,7 +15,7 @@ use crate::engine::{ImageGeometry, PairLooming};
 use crate::model::Scan;
 use crate::model::ScanPair;
 
-pub use cluster::{Cluster, ColSpan, hot_clusters};
+pub use cluster::{Cluster, ColSpan, hot_clusters, path_peak_looming};
 pub use corridor::{Corridor, PathSource};
 
 /// Schema of one event (`/looming/events` and the `--events` file's entries).
@@ -197,6 +197,8 @@ pub struct EventDetector {
     min_cells_used: Option<usize>,
     /// Slot and stamp of the last pair seen.
     last_slot: Option<(u64, i64)>,
+    /// [`path_peak_looming`] of the last pair seen.
+    path_peak_per_s: Option<f64>,
 }
 
 impl EventDetector {
@@ -209,12 +211,19 @@ impl EventDetector {
             next_id: 1,
             min_cells_used: None,
             last_slot: None,
+            path_peak_per_s: None,
         }
     }
 
     /// The smallest cluster of the last pair, cells.
     pub fn min_cells_used(&self) -> Option<usize> {
         self.min_cells_used
+    }
+
+    /// The looming of the strongest approach in the path in the last pair
+    /// ([`path_peak_looming`]), 1/s.
+    pub fn path_peak_looming_per_s(&self) -> Option<f64> {
+        self.path_peak_per_s
     }
 
     pub fn config(&self) -> &EventConfig {
@@ -242,6 +251,18 @@ impl EventDetector {
             .unwrap_or_else(|| default_min_cells(&looming.geometry));
         self.min_cells_used = Some(min_cells);
         let clusters = hot_clusters(looming, scan, &corridor, &self.config, min_cells);
+        // The floor's clusters can merge a hot object with its slower
+        // surroundings; the hot clusters keep the curve at or above the
+        // threshold wherever an event is hot.
+        let hottest = clusters
+            .iter()
+            .map(|c| c.looming_per_s)
+            .max_by(f64::total_cmp);
+        let floor = path_peak_looming(looming, scan, &corridor, &self.config, min_cells);
+        self.path_peak_per_s = match (hottest, floor) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
         let margin = association_margin_cols(&looming.geometry);
         let slot = self.slot_of(stamp_ns, pair.dt_s);
         let mut ended = self.close_stale(slot);
