@@ -207,5 +207,6 @@ pub(crate) fn render_options(args: &RenderArgs) -> Result<RenderOptions, Failure
         top_size_px: args.size.max(16),
         force: args.force,
         scans: scan_options(&args.scans)?,
+        engine: looming::engine::EngineConfig::default(),
     })
 }

@@ -4,8 +4,8 @@
 //! (`--view top`), with the threat zones for the threat channel.
 //!
 //! The log is replayed like `eval` does (auto-detected topics, raw or
-//! annotated logs alike); the engine runs, with its default settings, only on
-//! the chosen pair. Colours are [`crate::annotate::colour`]'s, as in the
+//! annotated logs alike); the engine runs, with `RenderOptions::engine` (the
+//! defaults from the command line), only on the chosen pair. Colours are [`crate::annotate::colour`]'s, as in the
 //! annotated output.
 
 use std::io::{BufWriter, Write};
@@ -81,6 +81,8 @@ pub struct RenderOptions {
     pub force: bool,
     /// How the log is read, decoded and paired (as `process` would).
     pub scans: ScanOptions,
+    /// The engine's settings (`batch` passes those of its `process` run).
+    pub engine: EngineConfig,
 }
 
 impl Default for RenderOptions {
@@ -96,6 +98,7 @@ impl Default for RenderOptions {
             top_size_px: 800,
             force: false,
             scans: ScanOptions::default(),
+            engine: EngineConfig::default(),
         }
     }
 }
@@ -239,7 +242,7 @@ pub fn render_pictures(
         };
         let pair = &pairs[index];
         if computed[index].is_none() {
-            computed[index] = engine::compute(pair, &EngineConfig::default());
+            computed[index] = engine::compute(pair, &options.engine);
         }
         let looming = computed[index]
             .as_ref()

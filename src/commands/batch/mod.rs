@@ -243,6 +243,8 @@ fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutc
     // that log unwritten): clear it before the log is redone.
     let _ = remove_stale_temp_files(&output);
     let _ = remove_stale_temp_files(&record_path);
+    // Pictures of an earlier run's events must not outlive them.
+    let _ = std::fs::remove_dir_all(options.out_dir.join(pictures::pictures_dir(&log.relative)));
     let record = process_log(options, log, &output, fingerprint, config_crc32);
     // A record that cannot be written only costs a re-run next time.
     let _ = record.write(&record_path);

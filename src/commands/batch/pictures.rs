@@ -34,7 +34,8 @@ pub(super) fn pictures_dir(relative: &Path) -> PathBuf {
 }
 
 /// Draw the pictures of `events` (already ranked) from `input` into
-/// `OUT_DIR/<pictures_dir>`, replacing what an earlier run left there.
+/// `OUT_DIR/<pictures_dir>` (which the caller has cleared of an earlier
+/// run's).
 pub(super) fn draw_event_pictures(
     config: &ProcessConfig,
     input: &Path,
@@ -44,8 +45,6 @@ pub(super) fn draw_event_pictures(
 ) -> Result<Vec<EventPictures>, RenderError> {
     let dir = pictures_dir(relative);
     let absolute_dir = out_dir.join(&dir);
-    // Pictures of events an earlier configuration found must not linger.
-    let _ = std::fs::remove_dir_all(&absolute_dir);
     if events.is_empty() {
         return Ok(Vec::new());
     }
@@ -90,6 +89,7 @@ pub(super) fn draw_event_pictures(
         top_size_px: TOP_SIZE_PX,
         force: true,
         scans: config.scans.clone(),
+        engine: config.annotate.engine.clone(),
         ..RenderOptions::default()
     };
     render_pictures(&options, &requests)?;
