@@ -65,6 +65,7 @@ fn options(input: &Path, output: PathBuf, channel: RenderChannel, at: RenderAt) 
         top_size_px: 800,
         force: false,
         scans: looming::pipeline::ScanOptions::default(),
+        engine: looming::engine::EngineConfig::default(),
     }
 }
 
