@@ -166,8 +166,11 @@ fn selected(info: &ChannelInfo, kind: MessageKind, encoding: WireEncoding) -> Se
 pub fn select(catalog: &Catalog, overrides: &TopicOverrides) -> Result<TopicSelection, TopicError> {
     let all = candidates(catalog);
     let lidar = choose(catalog, &all, Role::Lidar, overrides.lidar.as_deref())?.ok_or_else(|| {
+        let stopped = catalog.listing_stopped.as_ref().map_or(String::new(), |reason| {
+            format!("\nThe file could not be read to its end ({reason}): channels after that point are unknown.")
+        });
         TopicError::Missing(format!(
-            "no LiDAR topic found: no channel has a {} schema with a supported encoding (cdr, ros1, protobuf).\n{}",
+            "no LiDAR topic found: no channel has a {} schema with a supported encoding (cdr, ros1, protobuf).{stopped}\n{}",
             Role::Lidar.what(),
             list_all_channels(catalog)
         ))

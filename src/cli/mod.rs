@@ -20,6 +20,25 @@ use args::{
 pub(crate) use hints::hint;
 use report::{Progress, summary_text};
 
+/// Exit code of a run stopped by Ctrl-C (SIGINT), as shells report it.
+pub(crate) const EXIT_INTERRUPTED: i32 = 130;
+
+/// Ctrl-C asks the run to stop: it ends at its next record, removes its
+/// temporary output and exits with [`EXIT_INTERRUPTED`]; a second Ctrl-C
+/// exits at once (the temporary file is then left, and a later `batch` or
+/// `--force` run removes or replaces it).
+pub fn stop_on_ctrl_c() {
+    let handler = || {
+        if looming::pipeline::stop_requested() {
+            std::process::exit(EXIT_INTERRUPTED);
+        }
+        looming::pipeline::request_stop();
+    };
+    // Without a handler (another one is installed) Ctrl-C still ends the
+    // run, only less cleanly.
+    let _ = ctrlc::set_handler(handler);
+}
+
 /// An error with its exit code.
 pub struct Failure {
     pub error: anyhow::Error,
@@ -69,6 +88,7 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
             ProcessError::Topic { .. } | ProcessError::AlreadyProcessed { .. } => 2,
             ProcessError::Output(OutputError::Exists { .. } | OutputError::SameAsInput { .. }) => 2,
             ProcessError::Strict(_) => 3,
+            ProcessError::Interrupted { .. } => EXIT_INTERRUPTED,
             _ => 1,
         };
         Failure {
@@ -114,7 +134,11 @@ fn batch(args: BatchArgs) -> Result<(), Failure> {
 
 /// Exit code 2 for a usage error (an --only that names no log), else 1.
 fn batch_failure(error: looming::commands::batch::BatchError) -> Failure {
-    let code = if error.is_usage() { 2 } else { 1 };
+    let code = match error {
+        looming::commands::batch::BatchError::Interrupted => EXIT_INTERRUPTED,
+        _ if error.is_usage() => 2,
+        _ => 1,
+    };
     Failure::with_code(error, code)
 }
 

@@ -149,11 +149,23 @@ fn decode_ros<'a, R: WireRead<'a>>(
         MessageKind::PointCloud2 => {
             Decoded::Scan(scan_from_pointcloud2(&PointCloud2::read(r)?, limits)?)
         }
-        MessageKind::Imu => Decoded::Imu(imu_sample_from_imu(&Imu::read(r)?)),
-        MessageKind::TwistStamped => {
-            Decoded::Velocity(velocity_from_twist_stamped(&TwistStamped::read(r)?))
+        MessageKind::Imu => {
+            let imu = Imu::read(r)?;
+            finite("angular_velocity", &imu.angular_velocity)?;
+            Decoded::Imu(imu_sample_from_imu(&imu))
         }
-        MessageKind::Odometry => Decoded::Velocity(velocity_from_odometry(&Odometry::read(r)?)),
+        MessageKind::TwistStamped => {
+            let twist = TwistStamped::read(r)?;
+            finite("twist.linear", &twist.twist.linear)?;
+            finite("twist.angular", &twist.twist.angular)?;
+            Decoded::Velocity(velocity_from_twist_stamped(&twist))
+        }
+        MessageKind::Odometry => {
+            let odometry = Odometry::read(r)?;
+            finite("twist.twist.linear", &odometry.twist.twist.linear)?;
+            finite("twist.twist.angular", &odometry.twist.twist.angular)?;
+            Decoded::Velocity(velocity_from_odometry(&odometry))
+        }
         MessageKind::TfMessage => Decoded::Transforms {
             transforms: transforms_from_tf_message(&TFMessage::read(r)?)?,
             is_static: is_static_tf,
@@ -165,6 +177,18 @@ fn decode_ros<'a, R: WireRead<'a>>(
                 encoding: if R::IS_ROS1 { "ros1" } else { "cdr" },
             });
         }
+    })
+}
+
+/// A motion sample with a NaN or an infinity would poison every pair it is
+/// interpolated into: the message is bad, not the pairs.
+fn finite(field: &'static str, v: &crate::ros::msgs::Vector3) -> Result<(), DecodeError> {
+    if v.x.is_finite() && v.y.is_finite() && v.z.is_finite() {
+        return Ok(());
+    }
+    Err(DecodeError::NotFinite {
+        field,
+        value: format!("[{}, {}, {}]", v.x, v.y, v.z),
     })
 }
 

@@ -36,6 +36,10 @@ pub struct Catalog {
     pub metadata_count: u64,
     /// Total messages according to the file's statistics (indexed) or the listing.
     pub total_messages: Option<u64>,
+    /// Why a linear listing stopped before the end of the file (a truncated
+    /// file, a chunk that cannot be decompressed): what it lists is only
+    /// what comes before.
+    pub listing_stopped: Option<String>,
 }
 
 impl Catalog {

@@ -358,7 +358,12 @@ pub(super) fn decompress_into(
     out: &mut Vec<u8>,
 ) -> Result<(), String> {
     let limit = expected_size as u64 + 1;
-    out.reserve(expected_size.min(64 << 20));
+    // Sized by the data actually there, not by the (untrusted) header.
+    out.reserve(
+        expected_size
+            .min(data.len().saturating_mul(4))
+            .min(64 << 20),
+    );
     match compression {
         "" => out.extend_from_slice(data),
         "zstd" => {

@@ -46,6 +46,7 @@ fn scan_records(
     let reader_options = LinearReaderOptions::default()
         .with_validate_chunk_crcs(options.verify_crc)
         .with_record_length_limit(options.record_length_limit);
+    let file_size = file.metadata().map_or(u64::MAX, |m| m.len());
     let mut reader = LinearReader::new_with_options(reader_options);
     let mut bytes_fed: u64 = 0;
     let mut past_data_end = false;
@@ -60,8 +61,15 @@ fn scan_records(
         };
         match event {
             LinearReadEvent::ReadRequest(need) => {
+                // The reader asks for a whole record at once; a length
+                // field past the end of the file is a lie (or a truncation)
+                // and must not size its buffer (a 600-byte file declaring a
+                // 1 GiB record would allocate 1 GiB): ask the file for what
+                // it has, and the read ends at its end.
+                let remaining = file_size.saturating_sub(bytes_fed).max(1);
+                let want = need.min(usize::try_from(remaining).unwrap_or(usize::MAX));
                 let read = file
-                    .read(reader.insert(need))
+                    .read(reader.insert(want))
                     .map_err(|source| InputError::Io {
                         path: path.to_path_buf(),
                         offset: bytes_fed,
@@ -154,7 +162,7 @@ fn describe_stop(err: &mcap::McapError, bytes_fed: u64) -> String {
 pub(super) fn list_catalog(path: &Path, options: &InputOptions) -> Result<Catalog, InputError> {
     let mut catalog = Catalog::default();
     let mut pending_channels: BTreeMap<u16, mcap::records::Channel> = BTreeMap::new();
-    scan_records(path, options, &mut |seen| {
+    let stop = scan_records(path, options, &mut |seen| {
         match seen {
             Seen::Schema(schema) => {
                 catalog.schemas.entry(schema.id).or_insert(schema);
@@ -168,6 +176,7 @@ pub(super) fn list_catalog(path: &Path, options: &InputOptions) -> Result<Catalo
         }
         Ok(Flow::Continue(()))
     })?;
+    catalog.listing_stopped = stop.map(|stop| stop.reason);
     for (id, channel) in pending_channels {
         let schema = catalog.schemas.get(&channel.schema_id).cloned();
         catalog.channels.insert(

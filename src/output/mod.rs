@@ -143,6 +143,12 @@ pub fn check_overwrite(output: &Path, force: bool) -> Result<(), OutputError> {
 /// Whether `a` and `b` name the same existing file, whatever the spelling
 /// (relative, `..`, symbolic links); `false` if either does not exist.
 pub fn same_file(a: &Path, b: &Path) -> bool {
+    // The same device and inode: a symlink, a hard link, or another path.
+    #[cfg(unix)]
+    if let (Ok(a), Ok(b)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+        use std::os::unix::fs::MetadataExt;
+        return a.dev() == b.dev() && a.ino() == b.ino();
+    }
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
@@ -261,9 +267,14 @@ impl OutputWriter {
     }
 
     fn write_err(&self, source: mcap::McapError) -> OutputError {
-        OutputError::Write {
-            path: self.target.final_path().to_path_buf(),
-            source,
+        match source {
+            // The I/O error itself says what happened (a full disk...);
+            // the mcap crate's wrapper only says that one did.
+            mcap::McapError::Io(io) => self.io_err(io),
+            source => OutputError::Write {
+                path: self.target.final_path().to_path_buf(),
+                source,
+            },
         }
     }
 

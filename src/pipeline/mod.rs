@@ -15,6 +15,7 @@ mod stages;
 mod summary;
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use crate::annotate::AnnotateConfig;
@@ -78,8 +79,25 @@ pub enum ProcessError {
     },
     #[error("bad input (strict mode): {0}")]
     Strict(String),
+    #[error("{path}: interrupted; nothing written (the temporary output was removed)")]
+    Interrupted { path: PathBuf },
     #[error("internal error: {0}")]
     Internal(String),
+}
+
+/// Set once a stop is asked for (Ctrl-C): every running pass stops at its
+/// next record, and its temporary output is removed as on any error.
+static STOP_REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// Ask every `process` run of this process to stop (from a signal handler:
+/// it only sets a flag).
+pub fn request_stop() {
+    STOP_REQUESTED.store(true, Ordering::SeqCst);
+}
+
+/// Whether a stop was asked for.
+pub fn stop_requested() -> bool {
+    STOP_REQUESTED.load(Ordering::SeqCst)
 }
 
 /// Progress reports from the writer: messages copied so far and the total

@@ -172,6 +172,7 @@ fn read_and_decode(
         copy_budget: ByteBudget::new(COPY_BUDGET_BYTES),
         strict: config.scans.strict,
         strict_failure: None,
+        interrupted: false,
     };
     let result = match write_mode {
         WriteMode::PassThrough => {
@@ -184,6 +185,11 @@ fn read_and_decode(
             input.read_records(config.scans.strict, &mut |record| stage.record(record))
         }
     };
+    if stage.interrupted {
+        return Err(ProcessError::Interrupted {
+            path: config.output.clone(),
+        });
+    }
     finish_read(
         config.scans.strict,
         &file_name,
@@ -215,10 +221,16 @@ struct ReadStage<'a> {
     strict: bool,
     /// The bad message that stopped a strict run.
     strict_failure: Option<BadMessage>,
+    /// A stop was asked for (Ctrl-C): reading ended early.
+    interrupted: bool,
 }
 
 impl ReadStage<'_> {
-    fn send(&self, item: FromReader) -> Flow {
+    fn send(&mut self, item: FromReader) -> Flow {
+        if super::stop_requested() {
+            self.interrupted = true;
+            return Flow::Break(());
+        }
         match self.tx.send(item) {
             Ok(()) => Flow::Continue(()),
             Err(_) => Flow::Break(()),

@@ -87,6 +87,25 @@ pub enum DecodeError {
         point_step: u32,
     },
 
+    /// A stamp's nanoseconds are a second or more: no writer means that.
+    #[error("header stamp has {nanosec} nanoseconds (at most 999999999)")]
+    StampOutOfRange { nanosec: u32 },
+
+    /// A value the tool uses is NaN or infinite.
+    #[error("{field} is not finite ({value})")]
+    NotFinite { field: &'static str, value: String },
+
+    /// Two coordinate fields share bytes: the points would be garbage.
+    #[error(
+        "point fields `{first}` and `{second}` overlap (bytes {first_bytes:?} and {second_bytes:?})"
+    )]
+    FieldsOverlap {
+        first: &'static str,
+        second: &'static str,
+        first_bytes: std::ops::Range<usize>,
+        second_bytes: std::ops::Range<usize>,
+    },
+
     /// A used field has a datatype code this decoder does not know.
     #[error("point field `{name}` has unsupported datatype {datatype}")]
     UnsupportedFieldType { name: String, datatype: i64 },

@@ -78,6 +78,8 @@ pub enum BatchError {
     },
     #[error("no input log has the output path {relative} (see --list)")]
     NotAnInput { relative: PathBuf },
+    #[error("interrupted: the logs done have their outputs and records; a re-run does the rest")]
+    Interrupted,
 }
 
 impl BatchError {
@@ -143,6 +145,9 @@ pub fn run_batch(
                 loop {
                     let index = next.fetch_add(1, Ordering::Relaxed);
                     let Some(log) = logs.get(index) else { break };
+                    if crate::pipeline::stop_requested() {
+                        break;
+                    }
                     let outcome = run_log(options, log, config_crc32);
                     progress.done(log, &outcome);
                     outcomes.lock().unwrap_or_else(|e| e.into_inner())[index] = Some(outcome);
@@ -150,6 +155,9 @@ pub fn run_batch(
             });
         }
     });
+    if crate::pipeline::stop_requested() {
+        return Err(BatchError::Interrupted);
+    }
     let outcomes: Vec<LogOutcome> = outcomes
         .into_inner()
         .unwrap_or_else(|e| e.into_inner())
@@ -246,8 +254,11 @@ fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutc
     // Pictures of an earlier run's events must not outlive them.
     let _ = std::fs::remove_dir_all(options.out_dir.join(pictures::pictures_dir(&log.relative)));
     let record = process_log(options, log, &output, fingerprint, config_crc32);
-    // A record that cannot be written only costs a re-run next time.
-    let _ = record.write(&record_path);
+    // An interrupted log is not remembered: the next run redoes it. A
+    // record that cannot be written only costs a re-run next time.
+    if !crate::pipeline::stop_requested() {
+        let _ = record.write(&record_path);
+    }
     // The fleet files are built from the record as a later run reads it
     // back, so that they do not change when nothing else does (a float read
     // back from JSON need not be the float written).

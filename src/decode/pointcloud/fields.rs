@@ -158,6 +158,33 @@ pub(super) struct Readers {
     pub(super) time: Option<(FieldReader, TimeConvention, &'static str)>,
 }
 
+/// x, y and z must not share bytes: a cloud that says they do is corrupt
+/// (its points would all lie on a line or a plane), not a layout to read.
+fn check_coordinates_apart(
+    x: FieldReader,
+    y: FieldReader,
+    z: Option<FieldReader>,
+) -> Result<(), DecodeError> {
+    let bytes = |r: FieldReader| r.offset..r.offset + r.scalar.size_bytes();
+    let mut named = vec![("x", bytes(x)), ("y", bytes(y))];
+    if let Some(z) = z {
+        named.push(("z", bytes(z)));
+    }
+    for (i, (first, a)) in named.iter().enumerate() {
+        for (second, b) in &named[i + 1..] {
+            if a.start < b.end && b.start < a.end {
+                return Err(DecodeError::FieldsOverlap {
+                    first,
+                    second,
+                    first_bytes: a.clone(),
+                    second_bytes: b.clone(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 fn find<'a, 'f>(fields: &'a [FieldDesc<'f>], name: &str) -> Option<&'a FieldDesc<'f>> {
     fields.iter().find(|f| f.name == name)
 }
@@ -231,10 +258,12 @@ pub(super) fn resolve_readers(
         })
         .map(|(d, name)| field_reader(d, ps, be).map(|r| (r, name)))
         .transpose()?;
+    let (x, y, z) = (required("x")?, required("y")?, optional(&["z"])?);
+    check_coordinates_apart(x, y, z)?;
     Ok(Readers {
-        x: required("x")?,
-        y: required("y")?,
-        z: optional(&["z"])?,
+        x,
+        y,
+        z,
         intensity: optional(&["intensity", "reflectivity"])?,
         ring,
         time,

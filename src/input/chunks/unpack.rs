@@ -21,6 +21,10 @@ impl ChunkFault {
     }
 }
 
+/// Decompressed over compressed size beyond which a chunk header's size is
+/// not trusted to size a buffer up front (real LiDAR logs compress 2-5 x).
+const MAX_PLAUSIBLE_RATIO: usize = 64;
+
 /// Decompresses chunks one after another into one reused buffer (and, for
 /// zstd, one reused context): a chunk's worth of memory, allocated once.
 #[derive(Default)]
@@ -51,7 +55,12 @@ impl Unpacker {
         }
         let expected_size = header.uncompressed_size as usize;
         self.records.clear();
-        let decompressed = if header.compression == "zstd" {
+        // The one-shot zstd path sizes its buffer by the header; a header
+        // claiming far more than the data could hold (a crafted 1 GiB in a
+        // few bytes) goes through the streaming path, whose buffer grows
+        // only as the data really decompresses.
+        let plausible = expected_size <= data.len().saturating_mul(MAX_PLAUSIBLE_RATIO);
+        let decompressed = if header.compression == "zstd" && plausible {
             self.unpack_zstd(data, expected_size)
         } else {
             decompress_into(&header.compression, data, expected_size, &mut self.records)

@@ -60,6 +60,13 @@ impl<'a> RosMessage<'a> for Header {
             let nanosec = r.read_u32()?;
             (0, Time { sec, nanosec })
         };
+        // A time of a full second or more in `nanosec` is corrupt: read as
+        // it is, it would move the stamp by seconds.
+        if stamp.nanosec >= 1_000_000_000 {
+            return Err(DecodeError::StampOutOfRange {
+                nanosec: stamp.nanosec,
+            });
+        }
         let frame_id = r.read_str()?.to_owned();
         Ok(Self {
             seq,
