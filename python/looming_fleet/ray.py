@@ -55,6 +55,17 @@ class Lost:
     error: str
 
 
+def runtime_env(text: str) -> dict[str, Any]:
+    """--runtime-env's value: a JSON object, said so in the usage error when it is not."""
+    try:
+        value = json.loads(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"not JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("not a JSON object")
+    return value
+
+
 def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
     """Split off the process options after `--` (passed to every task verbatim), then parse ours."""
     argv = list(argv)
@@ -102,7 +113,7 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
     )
     parser.add_argument(
         "--runtime-env",
-        type=json.loads,
+        type=runtime_env,
         metavar="JSON",
         help='Ray runtime_env for the tasks, e.g. \'{"pip": ["looming-bin==0.1.0"]}\' to install the binary on the workers',
     )
@@ -127,7 +138,7 @@ def find_binary(requested: Optional[str]) -> tuple[str, str]:
             f"no looming binary: {name!r} is not an executable file or on PATH "
             "(give --looming PATH or set $LOOMING)"
         )
-    for_workers = str(Path(name).resolve()) if os.sep in name else name
+    for_workers = os.path.abspath(name) if os.sep in name else name
     return local, for_workers
 
 
@@ -299,8 +310,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"looming_fleet.ray: {error}", file=sys.stderr)
         return USAGE_ERROR
     # Absolute: a worker runs in another folder, maybe on another machine.
-    inputs = [str(Path(path).resolve()) for path in args.inputs]
-    out_dir = str(Path(args.output).resolve())
+    inputs = [os.path.abspath(path) for path in args.inputs]
+    out_dir = os.path.abspath(args.output)
     try:
         logs = list_logs(local_binary, inputs, out_dir)
     except subprocess.CalledProcessError as error:
