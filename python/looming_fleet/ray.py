@@ -21,7 +21,8 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import ray
 
@@ -31,6 +32,10 @@ USAGE_ERROR = 2
 FINISHED_CODES = (0, 1)
 # Attempts per log: the first run and one retry.
 ATTEMPTS = 2
+# Longest wait between two looks at the finished tasks: one ray.wait per
+# batch of finished tasks, not per task, keeps the loop linear in a fleet of
+# thousands of logs.
+PROGRESS_SECONDS = 1.0
 STDERR_TAIL_CHARS = 1500
 
 
@@ -89,8 +94,12 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
             "task failed twice, 2 usage (bad arguments, no looming binary)."
         ),
     )
-    parser.add_argument("inputs", nargs="+", metavar="INPUT", help="folders (every *.mcap below), MCAP files or manifests (.txt)")
-    parser.add_argument("-o", "--output", required=True, metavar="OUT_DIR", help="output folder, as for `looming batch`")
+    parser.add_argument(
+        "inputs", nargs="+", metavar="INPUT", help="folders (every *.mcap below), MCAP files or manifests (.txt)"
+    )
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="OUT_DIR", help="output folder, as for `looming batch`"
+    )
     parser.add_argument(
         "--address",
         default=None,
@@ -115,7 +124,8 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
         "--runtime-env",
         type=runtime_env,
         metavar="JSON",
-        help='Ray runtime_env for the tasks, e.g. \'{"pip": ["looming-bin==0.1.0"]}\' to install the binary on the workers',
+        help='Ray runtime_env for the tasks, e.g. \'{"pip": ["looming-bin==0.1.0"]}\' to install the binary '
+        "on the workers",
     )
     parser.add_argument("--force", action="store_true", help="redo every log, even those whose output is up to date")
     args = parser.parse_args(argv)
@@ -124,7 +134,7 @@ def parse_args(argv: Sequence[str]) -> tuple[argparse.Namespace, list[str]]:
     return args, process_options
 
 
-def find_binary(requested: Optional[str]) -> tuple[str, str]:
+def find_binary(requested: str | None) -> tuple[str, str]:
     """The binary for the driver, and the name to send to the workers.
 
     A path is sent as an absolute path (workers have another cwd); a bare name
@@ -135,8 +145,7 @@ def find_binary(requested: Optional[str]) -> tuple[str, str]:
     local = shutil.which(name)
     if local is None:
         raise LookupError(
-            f"no looming binary: {name!r} is not an executable file or on PATH "
-            "(give --looming PATH or set $LOOMING)"
+            f"no looming binary: {name!r} is not an executable file or on PATH (give --looming PATH or set $LOOMING)"
         )
     for_workers = os.path.abspath(name) if os.sep in name else name
     return local, for_workers
@@ -154,7 +163,8 @@ def list_logs(binary: str, inputs: Sequence[str], out_dir: str) -> list[Log]:
         text=True,
         check=True,
     )
-    return [Log(**json.loads(line)) for line in listed.stdout.splitlines() if line.strip()]
+    rows = [json.loads(line) for line in listed.stdout.splitlines() if line.strip()]
+    return [Log(relative=row["relative"], input=row["input"], output=row["output"]) for row in rows]
 
 
 def _worker_binary(name: str) -> str:
@@ -180,7 +190,8 @@ def _describe_exit(code: int) -> str:
     return f"exit code {code}"
 
 
-def _mtime_ns(path: Path) -> Optional[int]:
+def _mtime_ns(path: Path) -> int | None:
+    """A record's modification time, None while the log has none: tells a redone log from an up-to-date one."""
     try:
         return path.stat().st_mtime_ns
     except FileNotFoundError:
@@ -214,11 +225,15 @@ def run_log(binary: str, arguments: list[str], record: str, threads: int) -> dic
     try:
         entry = json.loads(record_path.read_text())["entry"]
     except (OSError, ValueError, KeyError) as error:
-        raise LogTaskError(f"looming {_describe_exit(done.returncode)} but left no readable record ({error}): {tail}") from None
+        raise LogTaskError(
+            f"looming {_describe_exit(done.returncode)} but left no readable record ({error}): {tail}"
+        ) from None
     return {"entry": entry, "redone": _mtime_ns(record_path) != before}
 
 
-def task_arguments(inputs: Sequence[str], out_dir: str, log: Log, force: bool, process_options: Sequence[str]) -> list[str]:
+def task_arguments(
+    inputs: Sequence[str], out_dir: str, log: Log, force: bool, process_options: Sequence[str]
+) -> list[str]:
     """`looming batch` arguments for one log: one log, one job, no progress output."""
     arguments = ["batch", *inputs, "-o", out_dir, "--only", log.relative, "--jobs", "1", "--quiet"]
     if force:
@@ -240,7 +255,8 @@ def progress_line(done: int, total: int, log: Log, result: dict[str, Any]) -> st
         return f"{head} up-to-date"
     if entry["status"] == "processed":
         reason = f": {entry['reason']}" if entry.get("reason") else ""
-        return f"{head} processed ({entry['scans']} scans, {entry['events']} near misses) in {entry['seconds']:.1f} s{reason}"
+        counts = f"{entry['scans']} scans, {entry['events']} near misses"
+        return f"{head} processed ({counts}) in {entry['seconds']:.1f} s{reason}"
     return f"{head} {entry['status']}: {entry.get('reason')}"
 
 
@@ -271,17 +287,21 @@ def run_tasks(
     counts = {"processed": 0, "up to date": 0, "skipped": 0, "failed": 0}
     lost: list[Lost] = []
     while pending:
-        [ref], _ = ray.wait(list(pending), num_returns=1)
-        log = pending.pop(ref)
-        done = len(logs) - len(pending)
-        try:
-            result = ray.get(ref)
-        except ray.exceptions.RayError as error:
-            lost.append(Lost(log, _error_text(error)))
-            print(f"  [{done}/{len(logs)}] {log.relative} LOST after {ATTEMPTS} attempts: {lost[-1].error}", file=sys.stderr)
-            continue
-        counts[result["entry"]["status"] if result["redone"] else "up to date"] += 1
-        print(progress_line(done, len(logs), log, result), file=sys.stderr, flush=True)
+        ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=PROGRESS_SECONDS)
+        for ref in ready:
+            log = pending.pop(ref)
+            done = len(logs) - len(pending)
+            try:
+                result = ray.get(ref)
+            except ray.exceptions.RayError as error:
+                lost.append(Lost(log, _error_text(error)))
+                print(
+                    f"  [{done}/{len(logs)}] {log.relative} LOST after {ATTEMPTS} attempts: {lost[-1].error}",
+                    file=sys.stderr,
+                )
+                continue
+            counts[result["entry"]["status"] if result["redone"] else "up to date"] += 1
+            print(progress_line(done, len(logs), log, result), file=sys.stderr, flush=True)
     return counts, lost
 
 
@@ -297,7 +317,7 @@ def report_lost(lost: Sequence[Lost]) -> None:
         print(f"  {item.log.input}: {item.error}", file=sys.stderr)
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """The command; returns `looming batch`'s exit code for the same fleet (1 also for a lost log).
 
     Joins the Ray cluster unless the caller already has (the tests share one

@@ -28,7 +28,9 @@ def imu_only_log() -> bytes:
     """
     records = [
         _record(0x01, _string("ros2") + _string("looming_fleet tests")),
-        _record(0x03, struct.pack("<H", 1) + _string("sensor_msgs/msg/Imu") + _string("ros2msg") + struct.pack("<I", 0)),
+        _record(
+            0x03, struct.pack("<H", 1) + _string("sensor_msgs/msg/Imu") + _string("ros2msg") + struct.pack("<I", 0)
+        ),
         _record(0x04, struct.pack("<HH", 1, 1) + _string("/imu/data") + _string("cdr") + struct.pack("<I", 0)),
     ]
     for i in range(10):

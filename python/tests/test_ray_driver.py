@@ -26,7 +26,7 @@ def relative_text(out: Path, name: str) -> str:
 
 
 def wrapper(tmp_path: Path, real: Path, crash: str) -> tuple[Path, Path]:
-    """A `looming` that records each run on safe.mcap in a file and runs `crash` (shell) first.
+    """A `looming` that notes each run on safe.mcap (and its engine threads) in a file, then runs `crash` (shell).
 
     Every other run (other logs, --list, --merge-only) goes straight to the real binary.
     """
@@ -35,7 +35,7 @@ def wrapper(tmp_path: Path, real: Path, crash: str) -> tuple[Path, Path]:
     script.write_text(
         "#!/bin/sh\n"
         'case " $* " in *" --only safe.mcap "*)\n'
-        f"  echo attempt >> '{attempts}'\n"
+        f"  echo \"attempt threads=$RAYON_NUM_THREADS\" >> '{attempts}'\n"
         f"  {crash}\n"
         "esac\n"
         f"exec '{real}' \"$@\"\n"
@@ -108,12 +108,14 @@ def test_a_rerun_redoes_nothing_and_writes_the_same_files(ray_run, fleet: Path, 
     assert {name: (out / name).read_bytes() for name in FLEET_FILES} == before
 
 
-def test_a_task_killed_once_is_retried(ray_cluster: None, two_logs: list[str], looming_bin: Path, tmp_path: Path, capfd) -> None:
+def test_a_task_killed_once_is_retried(
+    ray_cluster: None, two_logs: list[str], looming_bin: Path, tmp_path: Path, capfd
+) -> None:
     marker = tmp_path / "crashed"
     script, attempts = wrapper(tmp_path, looming_bin, f"[ -e '{marker}' ] || {{ touch '{marker}'; kill -9 $$; }}")
     out = tmp_path / "out"
     assert main([*two_logs, "-o", str(out), "--looming", str(script)]) == 0, capfd.readouterr().err
-    assert attempts.read_text().count("attempt") == 2
+    assert attempts.read_text().splitlines() == ["attempt threads=1"] * 2
     assert {name: e["status"] for name, e in fleet_entries(out).items()} == {
         "cut-in.mcap": "processed",
         "safe.mcap": "processed",
@@ -125,15 +127,17 @@ def test_a_task_that_always_crashes_is_reported_after_two_attempts(
 ) -> None:
     script, attempts = wrapper(tmp_path, looming_bin, "echo 'out of memory' >&2; exit 137")
     out = tmp_path / "out"
-    assert main([*two_logs, "-o", str(out), "--looming", str(script)]) == 1
-    assert attempts.read_text().count("attempt") == 2
+    assert main([*two_logs, "-o", str(out), "--looming", str(script), "--cpus-per-task", "2"]) == 1
+    assert attempts.read_text().splitlines() == ["attempt threads=2"] * 2
     err = capfd.readouterr().err
     assert "safe.mcap LOST after 2 attempts" in err, err
     assert f"  {two_logs[1]}: looming exit code 137 (128 + SIGKILL): out of memory" in err, err
     assert list(fleet_entries(out)) == ["cut-in.mcap"], "a lost log has no record"
 
 
-def test_process_options_after_double_dash_reach_every_log(ray_cluster: None, two_logs: list[str], looming_bin: Path, tmp_path: Path) -> None:
+def test_process_options_after_double_dash_reach_every_log(
+    ray_cluster: None, two_logs: list[str], looming_bin: Path, tmp_path: Path
+) -> None:
     out = tmp_path / "out"
     # The planted cut-in's time to contact is 1.0 s: no near miss below 0.1 s.
     assert main([*two_logs, "-o", str(out), "--looming", str(looming_bin), "--", "--event-ttc", "0.1"]) == 0
