@@ -19,12 +19,17 @@ import shutil
 import signal
 import subprocess
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-from collections.abc import Sequence
 
 import ray
+
+if not hasattr(ray, "init"):
+    # Python put the current folder first on sys.path and it is this file's
+    # folder, so `import ray` found this file instead of the ray package.
+    raise ImportError("run `python -m looming_fleet.ray` from another folder than python/looming_fleet/")
 
 USAGE_ERROR = 2
 # Exit codes after which the binary has written the log's record: 1 means the
@@ -50,6 +55,23 @@ class Log:
     relative: str
     input: str
     output: str
+
+
+@dataclass(frozen=True)
+class Fleet:
+    """What every task of one run shares: the absolute inputs and OUT_DIR, and the options for `looming batch`."""
+
+    inputs: list[str]
+    out_dir: str
+    force: bool
+    process_options: list[str]
+
+    def task_arguments(self, log: Log) -> list[str]:
+        """`looming batch` arguments for one log: one log, one job, no progress output."""
+        arguments = ["batch", *self.inputs, "-o", self.out_dir, "--only", log.relative, "--jobs", "1", "--quiet"]
+        if self.force:
+            arguments.append("--force")
+        return arguments + self.process_options
 
 
 @dataclass(frozen=True)
@@ -211,6 +233,7 @@ def run_log(binary: str, arguments: list[str], record: str, threads: int) -> dic
     try:
         done = subprocess.run(
             [_worker_binary(binary), *arguments],
+            check=False,  # the exit code is examined below
             env=dict(os.environ, RAYON_NUM_THREADS=str(threads)),
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
@@ -229,16 +252,6 @@ def run_log(binary: str, arguments: list[str], record: str, threads: int) -> dic
             f"looming {_describe_exit(done.returncode)} but left no readable record ({error}): {tail}"
         ) from None
     return {"entry": entry, "redone": _mtime_ns(record_path) != before}
-
-
-def task_arguments(
-    inputs: Sequence[str], out_dir: str, log: Log, force: bool, process_options: Sequence[str]
-) -> list[str]:
-    """`looming batch` arguments for one log: one log, one job, no progress output."""
-    arguments = ["batch", *inputs, "-o", out_dir, "--only", log.relative, "--jobs", "1", "--quiet"]
-    if force:
-        arguments.append("--force")
-    return arguments + list(process_options)
 
 
 def _error_text(error: Exception) -> str:
@@ -261,12 +274,7 @@ def progress_line(done: int, total: int, log: Log, result: dict[str, Any]) -> st
 
 
 def run_tasks(
-    logs: Sequence[Log],
-    binary: str,
-    inputs: Sequence[str],
-    out_dir: str,
-    args: argparse.Namespace,
-    process_options: Sequence[str],
+    logs: Sequence[Log], binary: str, fleet: Fleet, args: argparse.Namespace
 ) -> tuple[dict[str, int], list[Lost]]:
     """Submit one task per log, report each as it finishes; the counts per outcome and the lost logs."""
     task = ray.remote(run_log).options(
@@ -278,7 +286,7 @@ def run_tasks(
     pending = {
         task.remote(
             binary,
-            task_arguments(inputs, out_dir, log, args.force, process_options),
+            fleet.task_arguments(log),
             log.output + ".batch.json",
             args.cpus_per_task,
         ): log
@@ -307,7 +315,7 @@ def run_tasks(
 
 def merge(binary: str, out_dir: str) -> int:
     """Build the fleet files from every record under OUT_DIR/logs, as `looming batch` does."""
-    return subprocess.run([binary, "batch", "--merge-only", out_dir]).returncode
+    return subprocess.run([binary, "batch", "--merge-only", out_dir], check=False).returncode
 
 
 def report_lost(lost: Sequence[Lost]) -> None:
@@ -343,7 +351,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Workers then need only ray and the binary, not this package.
         ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     try:
-        counts, lost = run_tasks(logs, worker_binary, inputs, out_dir, args, process_options)
+        counts, lost = run_tasks(logs, worker_binary, Fleet(inputs, out_dir, args.force, process_options), args)
     finally:
         if joined:
             ray.shutdown()

@@ -50,6 +50,7 @@ def ray_run(fleet: Path, looming_bin: Path, ray_cluster: None, tmp_path_factory:
     out = tmp_path_factory.mktemp("ray") / "out"
     run = subprocess.run(
         [sys.executable, "-m", "looming_fleet.ray", fleet, "-o", out, "--address", "auto", "--looming", looming_bin],
+        check=False,
         capture_output=True,
         text=True,
     )
@@ -147,6 +148,7 @@ def test_process_options_after_double_dash_reach_every_log(
 def test_a_missing_binary_is_a_clear_usage_error(tmp_path: Path) -> None:
     run = subprocess.run(
         [sys.executable, "-m", "looming_fleet.ray", tmp_path, "-o", tmp_path / "out", "--looming", tmp_path / "nope"],
+        check=False,
         capture_output=True,
         text=True,
     )
