@@ -319,8 +319,8 @@ def merge(binary: str, out_dir: str) -> int:
 
 
 def report_lost(lost: Sequence[Lost]) -> None:
-    """Name each log that has no record (so no line in fleet.json) and its last error."""
-    print(f"error: {len(lost)} logs not in the fleet files: their task failed {ATTEMPTS} times", file=sys.stderr)
+    """Name each lost log and its last error: without a record from this run, the merge cannot list its result."""
+    print(f"error: {len(lost)} logs lost: their task failed {ATTEMPTS} times, leaving no record", file=sys.stderr)
     for item in lost:
         print(f"  {item.log.input}: {item.error}", file=sys.stderr)
 
