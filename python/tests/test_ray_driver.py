@@ -164,9 +164,12 @@ def test_no_binary_on_path_is_a_clear_usage_error(tmp_path: Path, monkeypatch, c
 
 
 def test_a_missing_input_is_named_with_its_error(ray_cluster: None, looming_bin: Path, tmp_path: Path, capfd) -> None:
-    """`looming batch` lists a missing input as failed but writes it no record: the driver names it."""
+    """A missing input is a failed log with its reason, in the merged fleet.json too (as `looming batch`)."""
     missing = tmp_path / "nope.mcap"
-    assert main([str(missing), "-o", str(tmp_path / "out"), "--looming", str(looming_bin)]) == 1
+    out = tmp_path / "out"
+    assert main([str(missing), "-o", str(out), "--looming", str(looming_bin)]) == 1
     err = capfd.readouterr().err
-    assert f"  {missing}: looming exit code 1 but left no readable record" in err, err
-    assert "No such file or directory" in err, err
+    assert "nope.mcap failed: No such file or directory" in err, err
+    entries = json.loads((out / "fleet.json").read_text())
+    assert [e["status"] for e in entries] == ["failed"]
+    assert "No such file or directory" in entries[0]["reason"]

@@ -310,13 +310,14 @@ pub(crate) fn batch_summary(outcomes: &[LogOutcome], options: &BatchOptions) -> 
         ran(LogStatus::Skipped),
         ran(LogStatus::Failed),
         near_misses,
-        match options.shard {
-            None => out_dir.join("near_misses.csv").display().to_string(),
-            Some(_) => format!(
-                "{} (a shard: fleet files by `looming batch --merge-only {}` once every shard is done)",
+        if options.shard.is_none() && options.only.is_empty() {
+            out_dir.join("report.html").display().to_string()
+        } else {
+            format!(
+                "{} (a part of the fleet: fleet files by `looming batch --merge-only {}` once every part is done)",
                 out_dir.join("logs").display(),
                 out_dir.display()
-            ),
+            )
         }
     )
 }

@@ -236,7 +236,15 @@ fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutc
     let (output, record_path) = output_paths(&options.out_dir, log);
     let fingerprint = match InputFingerprint::of(&log.input) {
         Ok(fingerprint) => fingerprint,
-        Err(error) => return unreadable(log, &error.to_string()),
+        Err(error) => {
+            // Recorded too, so that a merge (after shards or a distributed
+            // run) lists it; it never holds, so the next run tries again.
+            let outcome = unreadable(log, &error.to_string());
+            if !crate::pipeline::stop_requested() {
+                let _ = outcome.record.write(&record_path);
+            }
+            return outcome;
+        }
     };
     if !options.force
         && let Some(record) = LogRecord::read(&record_path)
