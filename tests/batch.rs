@@ -541,3 +541,64 @@ fn with_if_no_lidar_copy_a_log_without_lidar_is_copied_and_still_skipped() {
     let copied = common::read_all(&copy);
     assert_eq!(copied.messages.len(), 10);
 }
+
+#[test]
+fn ctrl_c_stops_a_batch_cleanly_and_a_rerun_finishes_it() {
+    let dir = scratch("batch-sigint");
+    let input = dir.join("in");
+    std::fs::create_dir_all(&input).unwrap();
+    for i in 0..6 {
+        std::fs::copy(sample("cut-in.mcap"), input.join(format!("drive-{i}.mcap"))).unwrap();
+    }
+    let out = dir.join("out");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_looming"))
+        .args([
+            "batch",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--jobs",
+            "1",
+            "-q",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first_record = out.join("logs/drive-0.mcap.batch.json");
+    let started = std::time::Instant::now();
+    while !first_record.exists() {
+        assert!(started.elapsed().as_secs() < 60, "no first record");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let run = child.wait_with_output().unwrap();
+    let text = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert_eq!(run.status.code(), Some(130), "{text}");
+    assert!(text.contains("interrupted"), "{text}");
+    let mut files = Vec::new();
+    files_below(&out, &mut files);
+    assert!(!files.iter().any(|f| f.ends_with(".tmp")), "{files:?}");
+    // Every log with a record has its whole output (a log interrupted after
+    // its output was complete has no record yet: the next run redoes it).
+    for i in 0..6 {
+        let log = out.join(format!("logs/drive-{i}.mcap"));
+        let record = out.join(format!("logs/drive-{i}.mcap.batch.json"));
+        assert!(!record.exists() || log.exists(), "drive-{i}");
+    }
+    let done_before = (0..6)
+        .filter(|i| out.join(format!("logs/drive-{i}.mcap.batch.json")).exists())
+        .count();
+    assert!(done_before < 6, "the interrupt came after the last log");
+    let rerun = batch(&input, &out, &[]);
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    assert!(
+        stderr(&rerun).contains(&format!("{done_before} up to date")),
+        "{}",
+        stderr(&rerun)
+    );
+    assert_eq!(fleet_entries(&out).len(), 6);
+}
