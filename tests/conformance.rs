@@ -47,6 +47,7 @@ struct Channel {
     topic: String,
     message_encoding: String,
     schema: Option<(String, String, Vec<u8>)>,
+    metadata: BTreeMap<String, String>,
 }
 
 #[derive(Debug, Default)]
@@ -131,6 +132,7 @@ fn expected(json: &Path) -> Expected {
                     topic: text(record, "topic"),
                     message_encoding: text(record, "message_encoding"),
                     schema: (schema_id != 0).then(|| schemas[&schema_id].clone()),
+                    metadata: serde_json::from_value(field(record, "metadata").clone()).unwrap(),
                 };
                 channels.insert(number(record, "id"), channel);
             }
@@ -189,6 +191,17 @@ fn check(input: &Path, output: &Path, extra: &[&str]) -> Result<(), String> {
     let summary = mcap::Summary::read(&bytes)
         .map_err(|e| format!("the output's summary does not read: {e}"))?
         .ok_or("the output has no summary")?;
+    // Each channel with messages is in the output's summary with its metadata
+    // (the linear pass compares encoding and schema below).
+    for want in expected.channels.values() {
+        let found = summary.channels.values().find(|c| c.topic == want.topic);
+        if found.map(|c| c.metadata.clone().into_iter().collect()) != Some(want.metadata.clone()) {
+            return Err(format!(
+                "channel {} is not in the output's summary with metadata {:?}",
+                want.topic, want.metadata
+            ));
+        }
+    }
     let stats = summary
         .stats
         .ok_or("the output's summary has no statistics")?;

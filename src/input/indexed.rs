@@ -47,6 +47,14 @@ pub(super) fn read_summary(
                     .map_err(|e| format!("seeking to the summary failed: {e}"))?;
                 reader.notify_seeked(pos);
             }
+            // A summary may repeat the channels without their schemas (valid:
+            // the schemas are in the data section), which the mcap crate cannot
+            // link; that is no sign of truncation, so say what it is.
+            Err(mcap::McapError::UnknownSchema(topic, id)) => {
+                return Err(format!(
+                    "the summary's channel {topic} refers to schema {id}, which only the data section holds"
+                ));
+            }
             Err(e) => {
                 return Err(format!(
                     "the summary could not be read ({e}); the file may be truncated"
