@@ -47,6 +47,14 @@ pub(super) fn read_summary(
                     .map_err(|e| format!("seeking to the summary failed: {e}"))?;
                 reader.notify_seeked(pos);
             }
+            // A summary may repeat the channels without their schemas (valid:
+            // the schemas are in the data section), which the mcap crate cannot
+            // link; that is no sign of truncation, so say what it is.
+            Err(mcap::McapError::UnknownSchema(topic, id)) => {
+                return Err(format!(
+                    "the summary's channel {topic} refers to schema {id}, which only the data section holds"
+                ));
+            }
             Err(e) => {
                 return Err(format!(
                     "the summary could not be read ({e}); the file may be truncated"
@@ -61,13 +69,21 @@ pub(super) fn read_summary(
 ///
 /// `IndexedReader` silently yields nothing for messages outside chunks, so the
 /// summary must have chunk indexes and statistics; the message count is checked
-/// again after the read.
+/// again after the read. An indexed read also takes channels and schemas only
+/// from the summary, and metadata and attachments only through their indexes,
+/// so the summary must hold as many of each as the statistics count
+/// (everything in it is optional: a summary with statistics and chunk indexes
+/// but no channel records, or no metadata indexes, is valid, and the records
+/// are then only in the data section, which a linear read sees).
 pub(super) fn why_not_indexed(summary: &mcap::Summary) -> Option<String> {
     let Some(stats) = &summary.stats else {
         return Some(
             "the summary has no statistics record, so index coverage cannot be checked".into(),
         );
     };
+    if let Some(missing) = summary_shortfall(summary, stats) {
+        return Some(missing);
+    }
     if summary.chunk_indexes.is_empty() && stats.message_count > 0 {
         return Some("the file is unchunked (no chunk indexes)".into());
     }
@@ -148,6 +164,46 @@ pub(super) fn read(
         sink,
     )?;
     Ok(report)
+}
+
+/// What the statistics count that the summary does not list, if anything.
+fn summary_shortfall(summary: &mcap::Summary, stats: &mcap::records::Statistics) -> Option<String> {
+    let listed = [
+        (
+            "channel records",
+            summary.channels.len() as u64,
+            u64::from(stats.channel_count),
+        ),
+        (
+            "schema records",
+            summary.schemas.len() as u64,
+            u64::from(stats.schema_count),
+        ),
+        (
+            "metadata indexes",
+            summary.metadata_indexes.len() as u64,
+            u64::from(stats.metadata_count),
+        ),
+        (
+            "attachment indexes",
+            summary.attachment_indexes.len() as u64,
+            u64::from(stats.attachment_count),
+        ),
+    ];
+    let channel_missing = stats
+        .channel_message_counts
+        .iter()
+        .any(|(id, count)| *count > 0 && !summary.channels.contains_key(id));
+    listed
+        .iter()
+        .find(|(_, found, counted)| found < counted)
+        .map(|(what, found, counted)| {
+            format!("the summary lists {found} {what} but its statistics count {counted}")
+        })
+        .or_else(|| {
+            channel_missing
+                .then(|| "the summary lacks the channel records of some messages".to_string())
+        })
 }
 
 pub(super) struct SideRecord {
