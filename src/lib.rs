@@ -25,6 +25,9 @@ pub mod ros;
 pub mod synth;
 // MCAP logs built in memory, for tests, examples and benches only: behind
 // the `testkit` feature, so the shipped binary does not carry it.
+#[cfg(feature = "fuzzing")]
+#[doc(hidden)]
+pub mod fuzzing;
 #[cfg(feature = "testkit")]
 pub mod testkit;
 pub mod topics;

@@ -42,6 +42,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("kitti", 7),
     // MCAP logs built in memory, for tests.
     ("testkit", 8),
+    ("fuzzing", 8),
 ];
 
 /// Uses between modules of the same layer that are part of the design.

@@ -48,7 +48,7 @@ fn temp_dir_and_prefix(path: &Path) -> (PathBuf, String) {
     (dir, format!(".{file_name}."))
 }
 
-/// Remove the temporary files [`beside`] left for `path` by a run that was
+/// Remove the temporary files `beside` left for `path` by a run that was
 /// killed before it could clean up; the number removed. Only a caller that
 /// knows no other process is writing `path` may call this.
 pub fn remove_stale_temp_files(path: &Path) -> std::io::Result<usize> {

@@ -293,7 +293,7 @@ pub fn load(name_or_path: &str) -> Result<Scenario, ScenarioError> {
     })
 }
 
-fn parse(origin: &str, text: &str) -> Result<Scenario, ScenarioError> {
+pub(crate) fn parse(origin: &str, text: &str) -> Result<Scenario, ScenarioError> {
     let scenario: Scenario = serde_json::from_str(text).map_err(|source| ScenarioError::Parse {
         path: origin.into(),
         source,

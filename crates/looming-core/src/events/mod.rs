@@ -15,7 +15,7 @@ use crate::engine::{ImageGeometry, PairLooming};
 use crate::model::Scan;
 use crate::model::ScanPair;
 
-pub use cluster::{Cluster, ColSpan, hot_clusters, path_peak_looming};
+pub use cluster::{Cluster, ColSpan, PATH_PEAK_FLOOR_TTC_S, hot_clusters, path_peak_looming};
 pub use corridor::{Corridor, PathSource};
 
 /// Schema of one event (`/looming/events` and the `--events` file's entries).
