@@ -1,8 +1,7 @@
 //! Writes the fuzz targets' seed corpora (`fuzz/corpus/<target>/`): small
 //! MCAP logs and the messages of each kind in each encoding, from the
-//! testkit's drive; KITTI lines; the built-in scenarios. Run by
-//! `scripts/fuzz.sh --seeds` (the seeds are committed; rerun after a format
-//! change).
+//! testkit's drive; KITTI lines; the built-in scenarios. The seeds are
+//! committed; rerun this after a format change (`docs/fuzzing.md`).
 //!
 //! Usage: cargo run --release --example fuzz_seeds -- fuzz/corpus
 

@@ -8,23 +8,25 @@ use std::io::Write;
 use crate::decode::{DecodeLimits, MessageKind, WireEncoding, decode};
 use crate::input::{Flow, InputFile, InputOptions};
 
-/// A decoder's limits in the fuzz runs: fewer points per scan than the
-/// default 4 M (a fuzzed cloud of 4 M points would only be slow).
-fn limits() -> DecodeLimits {
-    DecodeLimits {
-        max_points: 100_000,
-    }
+/// Points per scan in the fuzz runs, for the decoders and the KITTI scan
+/// reader: fewer than the default 4 M (a fuzzed cloud of 4 M points would
+/// only be slow).
+const MAX_POINTS: usize = 100_000;
+
+/// The bytes in a temporary file, for the readers that take a path (their
+/// size checks are part of what is fuzzed); `None` if it cannot be written.
+fn temp_file_holding(data: &[u8]) -> Option<tempfile::NamedTempFile> {
+    let mut file = tempfile::NamedTempFile::new().ok()?;
+    file.write_all(data).ok()?;
+    Some(file)
 }
 
 /// The bytes as an MCAP file, read whole: by its index when it has one
 /// (`linear` false), else (or when `linear`) record by record.
 pub fn mcap_input(data: &[u8], linear: bool) {
-    let Ok(mut file) = tempfile::NamedTempFile::new() else {
+    let Some(file) = temp_file_holding(data) else {
         return;
     };
-    if file.write_all(data).is_err() {
-        return;
-    }
     let Ok(mut input) = InputFile::open(file.path(), InputOptions::default()) else {
         return;
     };
@@ -46,7 +48,10 @@ pub fn message(kind: MessageKind, data: &[u8]) {
         _ => WireEncoding::Ros1,
     };
     let is_static = selector & 2 != 0;
-    let _ = decode(kind, encoding, is_static, payload, &limits());
+    let limits = DecodeLimits {
+        max_points: MAX_POINTS,
+    };
+    let _ = decode(kind, encoding, is_static, payload, &limits);
 }
 
 /// The KITTI readers: the first byte picks the calibration, OXTS or
@@ -71,13 +76,10 @@ pub fn kitti(data: &[u8]) {
 }
 
 fn velodyne(data: &[u8]) {
-    let Ok(mut file) = tempfile::NamedTempFile::new() else {
+    let Some(file) = temp_file_holding(data) else {
         return;
     };
-    if file.write_all(data).is_err() {
-        return;
-    }
-    if let Ok(points) = crate::kitti::velodyne::read_bin(file.path(), 100_000) {
+    if let Ok(points) = crate::kitti::velodyne::read_bin(file.path(), MAX_POINTS) {
         let _ = crate::kitti::velodyne::derive_rings(&points);
     }
 }

@@ -23,11 +23,13 @@ pub mod pipeline;
 pub mod quality;
 pub mod ros;
 pub mod synth;
-// MCAP logs built in memory, for tests, examples and benches only: behind
-// the `testkit` feature, so the shipped binary does not carry it.
+// The fuzz targets' entry points (`fuzz/`, `tests/fuzz_corpus.rs`): behind
+// the `fuzzing` feature, so the shipped binary does not carry them.
 #[cfg(feature = "fuzzing")]
 #[doc(hidden)]
 pub mod fuzzing;
+// MCAP logs built in memory, for tests, examples and benches only: behind
+// the `testkit` feature, so the shipped binary does not carry it.
 #[cfg(feature = "testkit")]
 pub mod testkit;
 pub mod topics;
