@@ -4,7 +4,8 @@
 //! `cargo run --release --example image_encoding -- OUT.mcap`.
 //! Reads `/looming/image/*` as `foxglove.RawImage` (rgb8, before PNG) or
 //! `foxglove.CompressedImage` (png), so it runs on logs of either version.
-//! The row `indexed fast, sub (written)` is `looming process`'s own encoder.
+//! The row `indexed fast, adaptive (written)` is `looming process`'s own
+//! encoder.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -155,7 +156,7 @@ fn main() {
         let (rows, cols) = (i.height as usize, i.width as usize);
         indexed_png(rows, cols, &i.indexes).expect("encodes")
     });
-    row("indexed fast, sub (written)", &written, Some(ms));
+    row("indexed fast, adaptive (written)", &written, Some(ms));
     let indexed_settings = [
         (
             "indexed fast, no filter",
@@ -163,9 +164,9 @@ fn main() {
             png::Filter::NoFilter,
         ),
         (
-            "indexed fast, adaptive",
+            "indexed fast, sub",
             png::Compression::Fast,
-            png::Filter::Adaptive,
+            png::Filter::Sub,
         ),
         (
             "indexed balanced, no filter",

@@ -1,22 +1,31 @@
 #!/usr/bin/env bash
-# Check that an annotated MCAP opens in third-party readers: the Python `mcap`
-# library and Rerun's MCAP importer. Outside CI: the first run creates a Python
-# venv and downloads ~250 MB from PyPI (rerun-sdk, pyarrow, numpy), ~30 s and
-# ~820 MB on disk; later runs reuse it and take a few seconds.
+# Check that annotated MCAPs open in third-party readers: the Python `mcap`
+# library, Rerun's MCAP importer and, when LOOMING_LICHTBLICK_WEB names a
+# Lichtblick web build, the real Lichtblick app (Foxglove Studio's open-source
+# line) in headless Chromium. Outside CI: the first run creates a Python venv
+# and downloads ~250 MB from PyPI (rerun-sdk, pyarrow, numpy), ~30 s and
+# ~820 MB on disk; later runs reuse it and take a few seconds per file (the
+# Lichtblick check about 35 s per file).
 #
-# Usage: scripts/check-viewers.sh [ANNOTATED.mcap]
-#   default: out/cut-in-annotated.mcap. When that default file is missing (or
-#   LOOMING_VIEWER_REBUILD=1) it is made first with
-#   `cargo run --release -- process sample_logs/cut-in.mcap -o out/cut-in-annotated.mcap --force`.
+# Usage: scripts/check-viewers.sh [ANNOTATED.mcap...]
+#   default: out/cut-in-annotated.mcap and its near-miss clip (out/clips/), and,
+#   when ../shared/real-data/ is there, out/kitti-22-annotated.mcap (KITTI, a
+#   pass-through output) and its first clip. Missing defaults (or all of them with
+#   LOOMING_VIEWER_REBUILD=1) are made first with `cargo run --release -- process
+#   ... --clips out/clips 2`.
 #
 # Environment:
 #   LOOMING_VIEWER_VENV    venv directory (default target/viewer-venv; reused if present)
 #   LOOMING_VIEWER_PYTHON  interpreter that creates the venv (default python3, >= 3.10)
-#   LOOMING_VIEWER_RRD     also keep the Rerun recording at this path (open it with
-#                          `$LOOMING_VIEWER_VENV/bin/rerun FILE.rrd`); default: a temp file
-#   LOOMING_VIEWER_REBUILD=1  regenerate the default output before checking
+#   LOOMING_VIEWER_RRD     also keep the Rerun recording of the last file at this path
+#                          (open it with `$LOOMING_VIEWER_VENV/bin/rerun FILE.rrd`)
+#   LOOMING_VIEWER_REBUILD=1  regenerate the default outputs before checking
+#   LOOMING_LICHTBLICK_WEB a Lichtblick web build (`lb/web/.webpack`, docs/viewers.md);
+#                          unset: the Lichtblick check is skipped, and said so
+#   LOOMING_VIEWER_KIT     the viewer kit (default ../shared/viewer-check)
+#   LOOMING_LICHTBLICK_SHOTS  where its screenshots stay (default target/lichtblick-shots)
 #   (relative LOOMING_VIEWER_* paths are taken from the repository root, the MCAP
-#   argument from the current directory)
+#   arguments from the current directory)
 #
 # What it checks (exit status 1 with a FAIL line on the first problem):
 #   1. mcap (Python): the whole file is read record by record with CRC
@@ -41,6 +50,10 @@
 #      row per MCAP message, the first blob byte-identical to the MCAP's PNG (the
 #      viewer decodes it with the `image` crate, as tests/annotate.rs does).
 #   It ends with a table: topic, messages, and what Rerun made of the topic.
+#   3. Lichtblick (scripts/check_lichtblick.py): each file opened as a user opens
+#      it (no seek) and seeked to its first near miss, with the layout of `looming
+#      layout`; its Alerts tab must be empty and its Topics tab must list every
+#      channel with messages at a rate above 0 Hz.
 set -euo pipefail
 caller=$PWD
 cd "$(dirname "$0")/.."
@@ -49,8 +62,12 @@ root=$PWD
 die() { echo "check-viewers: FAIL: $*" >&2; exit 1; }
 
 default_mcap=out/cut-in-annotated.mcap
-mcap=${1:-$default_mcap}
-[[ $# -ge 1 && $mcap != /* ]] && mcap=$caller/$mcap
+kitti_input=$root/../shared/real-data/kitti-22-scans-lidar-only.mcap
+kitti_mcap=out/kitti-22-annotated.mcap
+mcaps=()
+for arg in "$@"; do
+  [[ $arg == /* ]] && mcaps+=("$arg") || mcaps+=("$caller/$arg")
+done
 venv=${LOOMING_VIEWER_VENV:-target/viewer-venv}
 python=${LOOMING_VIEWER_PYTHON:-python3}
 
@@ -84,14 +101,22 @@ if [[ ! -f $stamp || $(cat "$stamp") != "$wanted" ]]; then
   echo "check-viewers: installed in $((SECONDS - start)) s" >&2
 fi
 
-# 2. The annotated MCAP ---------------------------------------------------------
-is_default=0
-[[ $(realpath -m "$mcap") == "$root/$default_mcap" ]] && is_default=1
-if [[ $is_default == 1 && ( ! -f $mcap || ${LOOMING_VIEWER_REBUILD:-0} == 1 ) ]]; then
-  echo "check-viewers: making $mcap" >&2
-  cargo run --release -- process sample_logs/cut-in.mcap -o "$default_mcap" --force
+# 2. The annotated MCAPs -------------------------------------------------------
+make_default() {  # INPUT OUTPUT
+  if [[ ! -f $2 || ${LOOMING_VIEWER_REBUILD:-0} == 1 ]]; then
+    echo "check-viewers: making $2 and its clips" >&2
+    cargo run --release -q -- process "$1" -o "$2" --force --clips out/clips 2 -q
+  fi
+}
+if [[ ${#mcaps[@]} == 0 ]]; then
+  make_default sample_logs/cut-in.mcap "$default_mcap"
+  mcaps+=("$root/$default_mcap" "$root/out/clips/cut-in-annotated.event-1.mcap")
+  if [[ -f $kitti_input ]]; then
+    make_default "$kitti_input" "$kitti_mcap"
+    mcaps+=("$root/$kitti_mcap" "$root/out/clips/kitti-22-annotated.event-1.mcap")
+  fi
 fi
-[[ -f $mcap ]] || die "$mcap: no such file"
+for mcap in "${mcaps[@]}"; do [[ -f $mcap ]] || die "$mcap: no such file"; done
 
 # 3. The checks -----------------------------------------------------------------
 work=$(mktemp -d)
@@ -440,6 +465,25 @@ print(f"check-viewers: OK: {MCAP} reads in mcap {importlib.metadata.version('mca
       f"and Rerun {rr.__version__} (Points3D with colours, PNG range images)")
 PY
 
-hint=""
-[[ $is_default == 1 ]] && hint=" (stale output? run again with LOOMING_VIEWER_REBUILD=1)"
-"$venv/bin/python" "$work/check.py" "$mcap" "$rrd" "$hint"
+hint=" (stale output? run again with LOOMING_VIEWER_REBUILD=1)"
+for mcap in "${mcaps[@]}"; do
+  echo "check-viewers: == $mcap" >&2
+  "$venv/bin/python" "$work/check.py" "$mcap" "$rrd" "$hint"
+done
+
+# 4. Lichtblick ------------------------------------------------------------------
+if [[ -z ${LOOMING_LICHTBLICK_WEB:-} ]]; then
+  echo "check-viewers: Lichtblick check skipped: set LOOMING_LICHTBLICK_WEB to a Lichtblick web build (docs/viewers.md)" >&2
+  exit 0
+fi
+kit=${LOOMING_VIEWER_KIT:-$root/../shared/viewer-check}
+shots=${LOOMING_LICHTBLICK_SHOTS:-target/lichtblick-shots}
+[[ -f $kit/shoot.py ]] || die "$kit: no viewer kit there (shoot.py); set LOOMING_VIEWER_KIT"
+[[ -x /usr/bin/chromium ]] || die "/usr/bin/chromium missing: apt-get install chromium"
+if ! "$venv/bin/python" -c 'import playwright' 2>/dev/null; then
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check playwright==1.65.2 \
+    || die "pip install playwright into $venv failed"
+fi
+cargo build --release -q
+PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 "$venv/bin/python" scripts/check_lichtblick.py \
+  "$kit" "$LOOMING_LICHTBLICK_WEB" target/release/looming "$shots" "${mcaps[@]}"

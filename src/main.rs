@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    restore_sigpipe();
     let args = cli::Cli::parse();
     cli::stop_on_ctrl_c();
     match cli::run(args) {
@@ -18,5 +19,17 @@ fn main() -> ExitCode {
             eprintln!("error: {}{hint}", failure.error);
             ExitCode::from(failure.code as u8)
         }
+    }
+}
+
+/// Rust ignores SIGPIPE, so a write to a closed pipe (`looming events --json |
+/// head`) fails and `println!` panics. Restore the default: the process ends
+/// quietly when the reader goes away, as `cat` or `grep` do.
+fn restore_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in main, before any thread exists; it only
+    // resets one signal's disposition to the system default.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

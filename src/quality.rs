@@ -88,11 +88,56 @@ impl MaskCounts {
 /// 1e-4 to 100 1/s: bins 4.7 % wide), kept sparse, so that medians over a
 /// whole log can be pooled in bounded memory.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(from = "HistogramWire", into = "HistogramWire")]
 pub struct AbsHistogram {
     /// `[bin, count]`, bins ascending: bin 0 holds |x| < 1e-4, bin `k >= 1`
     /// holds `1e-4 * 10^((k-1)/50) <= |x| < 1e-4 * 10^(k/50)`, bin 301 holds
     /// everything from 100 up.
     pub counts: Vec<[u64; 2]>,
+}
+
+/// How a histogram is written: two arrays of integers, `bins` and their
+/// `counts`. Foxglove's and Lichtblick's JSON-schema reader takes no array of
+/// arrays (one such property hides the whole topic); logs written before
+/// that hold `counts` as `[bin, count]` pairs, which still read.
+#[derive(Serialize, Deserialize)]
+struct HistogramWire {
+    #[serde(default)]
+    bins: Vec<u64>,
+    counts: WireCounts,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(untagged)]
+enum WireCounts {
+    Counts(Vec<u64>),
+    Pairs(Vec<[u64; 2]>),
+}
+
+impl From<AbsHistogram> for HistogramWire {
+    fn from(histogram: AbsHistogram) -> Self {
+        let (bins, counts) = histogram.counts.iter().map(|&[bin, n]| (bin, n)).unzip();
+        Self {
+            bins,
+            counts: WireCounts::Counts(counts),
+        }
+    }
+}
+
+impl From<HistogramWire> for AbsHistogram {
+    fn from(wire: HistogramWire) -> Self {
+        let counts = match wire.counts {
+            WireCounts::Pairs(pairs) => pairs,
+            // A bin without a count (arrays of unequal length) is dropped.
+            WireCounts::Counts(counts) => wire
+                .bins
+                .iter()
+                .zip(counts)
+                .map(|(&bin, n)| [bin, n])
+                .collect(),
+        };
+        Self { counts }
+    }
 }
 
 const HIST_LOWEST: f64 = 1e-4;
@@ -179,8 +224,10 @@ impl AbsHistogram {
 pub struct GroundSide {
     pub cells: u64,
     /// Median fused looming, 1/s (0 on a static ground when all is right).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_fused_per_s: Option<f64>,
     /// Median `D = L_lidar - L_ray_ego`, 1/s (`None` without ego velocity).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_d_per_s: Option<f64>,
 }
 
@@ -195,14 +242,18 @@ pub struct GroundQuality {
     pub moving_cells: u64,
     /// Dominant ground height in the LiDAR frame (median z of the candidate
     /// cells), metres: minus the sensor's height above the ground.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height_m: Option<f64>,
     /// Slope of the plane fitted through the ground, seen in the LiDAR
     /// frame: about x (positive when the ground rises to the left) and about
     /// y (positive when it rises ahead), degrees. A level mount on a flat road
     /// reads 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub roll_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pitch_deg: Option<f64>,
     /// Median |fused| over the trusted static ground cells, 1/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_abs_fused_per_s: Option<f64>,
     /// The same values, for pooling over a log.
     pub abs_fused_histogram: AbsHistogram,
@@ -218,11 +269,13 @@ pub struct PairQuality {
     /// Points that are their cell's surface, in a cell with mask 0.
     pub trusted_points: u64,
     /// `trusted_points / points`: the headline figure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trusted_fraction: Option<f64>,
     /// Occupied cells of the range image (a return in the current scan).
     pub cells: u64,
     /// Occupied cells with mask 0.
     pub trusted_cells: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trusted_cell_fraction: Option<f64>,
     /// Occupied cells per mask bit.
     pub masked_cells: MaskCounts,
@@ -231,12 +284,15 @@ pub struct PairQuality {
     pub static_cells: u64,
     /// Median |L_lidar - L_ray_ego| over the trusted static cells, 1/s
     /// (`None` without ego velocity).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_abs_d_static_per_s: Option<f64>,
     /// The same values, for pooling over a log (`None` without ego velocity).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub abs_d_static_histogram: Option<AbsHistogram>,
     /// Trusted cells flagged moving.
     pub moving_cells: u64,
     /// `moving_cells / trusted_cells`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub moving_fraction: Option<f64>,
     /// Cells at a threat level (low or above).
     pub threat_cells: u64,

@@ -336,13 +336,18 @@ fn assert_range_image_shows(
     let decoded = image::load_from_memory_with_format(&png, image::ImageFormat::Png)
         .expect("a PNG")
         .to_rgb8();
+    // Each beam is drawn `scale` pixels tall, so that the image is at most
+    // 8 times wider than tall.
+    let scale = looming::annotate::foxglove::image_row_scale(rows, cols);
+    assert_eq!(scale, cols.div_ceil(rows * 8).clamp(1, 8));
     assert_eq!(decoded.width(), cols as u32);
-    assert_eq!(decoded.height(), rows as u32);
+    assert_eq!(decoded.height(), (rows * scale) as u32);
     let data = decoded.into_raw();
-    assert_eq!(data.len(), rows * cols * 3);
+    assert_eq!(data.len(), rows * scale * cols * 3);
     for cell in (0..rows * cols).step_by(7) {
         let (row, col) = (cell / cols, cell % cols);
-        let at = ((rows - 1 - row) * cols + col) * 3;
+        let pixel_row = (rows - 1 - row) * scale + (cell / 7) % scale;
+        let at = (pixel_row * cols + col) * 3;
         let expected = if result.image.point[cell] == looming::engine::NO_POINT {
             colour::EMPTY
         } else if result.mask[cell] != 0 {

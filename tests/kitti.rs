@@ -458,7 +458,24 @@ fn a_kitti_folder_imports_processes_evaluates_renders_and_matches_the_direct_run
     let processed = process_finds_the_cut_in(&dir, &imported);
     assert_eval_matches_direct(&dir, &imported, &synth);
     assert_render_writes_a_png(&dir, &processed);
+    assert_opens_in_viewers_in_velo_link(&dir, &imported, &processed);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The import and its annotated log open in Foxglove and Lichtblick, and
+/// their layout follows KITTI's LiDAR frame.
+fn assert_opens_in_viewers_in_velo_link(dir: &Path, imported: &Path, processed: &Path) {
+    common::viewer::assert_opens_in_viewers(imported);
+    common::viewer::assert_opens_in_viewers(processed);
+    let layout = dir.join("layout.json");
+    run(&[
+        "layout",
+        processed.to_str().unwrap(),
+        "-o",
+        layout.to_str().unwrap(),
+    ]);
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&layout).unwrap()).unwrap();
+    assert_eq!(json["configById"]["3D!looming"]["followTf"], "velo_link");
 }
 
 /// Import that must fail with exit code 1; its message.

@@ -25,8 +25,11 @@ pub struct PairRecord {
     pub previous: ScanRecord,
     pub current: ScanRecord,
     pub dt_s: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub velocity_lidar_mps: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angular_velocity_lidar_radps: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub speed_mps: Option<f64>,
     pub unavailable: Vec<String>,
     pub extrinsic: ExtrinsicRecord,
@@ -73,7 +76,9 @@ impl LayoutRecord {
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct ExtrinsicRecord {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub velocity: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imu: Option<String>,
 }
 

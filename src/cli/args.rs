@@ -61,6 +61,13 @@ pub(crate) enum Command {
     /// `process` would use.
     #[command(after_help = EXIT_CODES)]
     Inspect(InspectArgs),
+    /// Write a Foxglove / Lichtblick layout for an annotated log: a 3D panel
+    /// following the log's own LiDAR frame with the looming clouds, moving
+    /// objects and threat zones, the two looming range images, the near-miss
+    /// events and their log lines (docs/viewers.md). Import it in the app's
+    /// Layouts menu, then open the log.
+    #[command(after_help = EXIT_CODES)]
+    Layout(LayoutArgs),
     /// Write a synthetic drive with analytic ground truth (/truth/*) as a ROS 2 MCAP.
     ///
     /// Built-in scenarios: straight-road, urban-turn, follow, cut-in, crossing,
@@ -240,6 +247,11 @@ pub(crate) struct ProcessArgs {
     /// write fresh ones.
     #[arg(long)]
     pub(crate) replace: bool,
+    /// For each near miss, also write a clip into DIR: an MCAP of every
+    /// channel of the output from SECONDS before the near miss to SECONDS
+    /// after it, named OUTPUT-NAME.event-ID.mcap (docs/viewers.md).
+    #[arg(long, num_args = 2, value_names = ["DIR", "SECONDS"])]
+    pub(crate) clips: Option<Vec<String>>,
     #[command(flatten)]
     pub(crate) annotate: AnnotateArgs,
     /// No progress bar and no summary on stderr.
@@ -264,6 +276,22 @@ pub(crate) struct QualityArgs {
     /// (schema: schemas/looming.QualityReport.schema.json).
     #[arg(long, value_name = "FILE")]
     pub(crate) json: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct LayoutArgs {
+    /// An MCAP written by `looming process` (or its input: the frame is then
+    /// read from the LiDAR topic).
+    pub(crate) log: PathBuf,
+    /// Layout file to write (JSON).
+    #[arg(short, long, value_name = "LAYOUT.json")]
+    pub(crate) output: PathBuf,
+    /// The LiDAR topic, when the log has several.
+    #[arg(long, value_name = "TOPIC")]
+    pub(crate) lidar_topic: Option<String>,
+    /// Replace OUTPUT if it exists.
+    #[arg(long)]
+    pub(crate) force: bool,
 }
 
 #[derive(Debug, Args)]
@@ -388,6 +416,12 @@ pub(crate) struct BatchArgs {
     /// Redo every log, even those whose output is up to date.
     #[arg(long)]
     pub(crate) force: bool,
+    /// For each near miss, also write a clip: an MCAP of every channel of
+    /// the annotated log from SECONDS before the near miss to SECONDS after
+    /// it, in OUT_DIR/clips/ (linked from near_misses.jsonl / .csv and the
+    /// report).
+    #[arg(long, value_name = "SECONDS")]
+    pub(crate) clips: Option<String>,
     #[command(flatten)]
     pub(crate) scans: ScanArgs,
     #[command(flatten)]

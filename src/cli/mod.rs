@@ -14,8 +14,8 @@ use looming::pipeline::ProcessError;
 
 pub use args::Cli;
 use args::{
-    BatchArgs, Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, ProcessArgs,
-    QualityArgs, RenderArgs, SynthArgs,
+    BatchArgs, Command, EvalArgs, EventsArgs, ImportKittiArgs, InspectArgs, LayoutArgs,
+    ProcessArgs, QualityArgs, RenderArgs, SynthArgs,
 };
 pub(crate) use hints::hint;
 use report::{Progress, summary_text};
@@ -69,6 +69,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Process(args) => process(args),
         Command::Batch(args) => batch(args),
         Command::Inspect(args) => inspect(args),
+        Command::Layout(args) => layout(args),
         Command::Synth(args) => synth(args),
         Command::Eval(args) => eval(args),
         Command::Events(args) => events(args),
@@ -80,6 +81,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
 
 fn process(args: ProcessArgs) -> Result<(), Failure> {
     let config = resolve::process_config(&args)?;
+    let clips = resolve::process_clips(&args)?;
     let progress = Progress::new(args.quiet);
     let result = looming::pipeline::process(&config, &progress);
     progress.bar.finish_and_clear();
@@ -104,6 +106,31 @@ fn process(args: ProcessArgs) -> Result<(), Failure> {
     }
     if !args.quiet {
         eprint!("{}", summary_text(&summary));
+    }
+    if let Some((dir, seconds)) = clips {
+        let stem = config
+            .output
+            .file_stem()
+            .unwrap_or_default()
+            .to_string_lossy();
+        let written = looming::commands::clips::write_clips(
+            &config.output,
+            &summary.events,
+            &dir,
+            &stem,
+            seconds,
+            args.force,
+        )
+        .map_err(|error| {
+            let code = match &error {
+                looming::commands::clips::ClipError::Output(OutputError::Exists { .. }) => 2,
+                _ => 1,
+            };
+            Failure::with_code(error, code)
+        })?;
+        if !args.quiet {
+            eprint!("{}", report::clips_text(&written, &dir));
+        }
     }
     Ok(())
 }
@@ -221,6 +248,33 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
         summary.width_px,
         summary.height_px,
         summary.output.display()
+    );
+    Ok(())
+}
+
+fn layout(args: LayoutArgs) -> Result<(), Failure> {
+    use looming::output::{OutputError, check_overwrite, same_file};
+    let usage = |error: OutputError| Failure::with_code(error, 2);
+    if same_file(&args.log, &args.output) {
+        return Err(usage(OutputError::SameAsInput {
+            path: args.output.clone(),
+        }));
+    }
+    check_overwrite(&args.output, args.force).map_err(usage)?;
+    let target = looming::commands::layout::target_of(&args.log, args.lidar_topic.as_deref());
+    let target = target.map_err(|error| {
+        let code = match error {
+            looming::commands::layout::LayoutError::Topic { .. } => 2,
+            _ => 1,
+        };
+        Failure::with_code(error, code)
+    })?;
+    looming::commands::layout::write_layout(&args.output, &target)?;
+    eprintln!(
+        "looming layout: 3D panel in frame {} (from {}) -> {}",
+        target.frame_id,
+        target.frame_from,
+        args.output.display()
     );
     Ok(())
 }

@@ -321,3 +321,27 @@ pub(crate) fn batch_summary(outcomes: &[LogOutcome], options: &BatchOptions) -> 
         }
     )
 }
+
+/// The `clips` line of `process --clips`: how many, where, and each file.
+pub(crate) fn clips_text(
+    clips: &[looming::commands::clips::ClipFile],
+    dir: &std::path::Path,
+) -> String {
+    let mut out = format!(
+        "  clips         {} written to {}\n",
+        clips.len(),
+        dir.display()
+    );
+    for clip in clips {
+        let _ = writeln!(
+            out,
+            "    near miss #{}: {} ({} messages, {} to {})",
+            clip.event_id,
+            clip.path.display(),
+            clip.messages,
+            format_log_time(clip.start_log_time_ns),
+            format_log_time(clip.end_log_time_ns)
+        );
+    }
+    out
+}

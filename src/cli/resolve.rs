@@ -166,6 +166,30 @@ pub(crate) fn process_config(args: &ProcessArgs) -> Result<ProcessConfig, Failur
     Ok(config)
 }
 
+/// `process --clips DIR SECONDS`: the folder and the seconds around each
+/// near miss.
+pub(crate) fn process_clips(args: &ProcessArgs) -> Result<Option<(PathBuf, f64)>, Failure> {
+    let Some(values) = &args.clips else {
+        return Ok(None);
+    };
+    let [dir, seconds] = values.as_slice() else {
+        return Err(usage(
+            "--clips takes a folder and a number of seconds".into(),
+        ));
+    };
+    Ok(Some((PathBuf::from(dir), clip_seconds(seconds)?)))
+}
+
+/// Seconds of a clip before and after its near miss: finite, 0 to 600.
+pub(crate) fn clip_seconds(text: &str) -> Result<f64, Failure> {
+    match text.parse::<f64>() {
+        Ok(seconds) if seconds.is_finite() && (0.0..=600.0).contains(&seconds) => Ok(seconds),
+        _ => Err(usage(format!(
+            "--clips: seconds must be a number from 0 to 600, not {text:?}"
+        ))),
+    }
+}
+
 /// `looming batch`'s options: `process`'s configuration for every log.
 pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
     if args.jobs == Some(0) {
@@ -181,6 +205,7 @@ pub(crate) fn batch_options(args: &BatchArgs) -> Result<BatchOptions, Failure> {
         only: args.only.clone(),
         force: args.force,
         process,
+        clips_margin_s: args.clips.as_deref().map(clip_seconds).transpose()?,
     })
 }
 

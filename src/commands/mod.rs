@@ -7,8 +7,10 @@
 
 mod annotated;
 pub mod batch;
+pub mod clips;
 pub mod eval;
 pub mod events;
 pub mod inspect;
+pub mod layout;
 pub mod quality;
 pub mod render;

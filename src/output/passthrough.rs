@@ -124,7 +124,21 @@ impl<W: Write> PassThroughWriter<W> {
 
     /// An input chunk and its message indexes, byte for byte; its index
     /// moved to where they now sit.
+    ///
+    /// A chunk that holds no message is left out: it can only hold schema
+    /// and channel records, and this file already has every one of them
+    /// before its first chunk (a pass-through read needs a summary that lists
+    /// them all). Copied, its index would say its messages start and end at
+    /// time 0, and viewers take the smallest start of the chunk indexes as
+    /// the start of the log (Foxglove and Lichtblick then open on 1970). (A
+    /// chunk with messages but no message index never gets here: a
+    /// pass-through read needs the indexes to count every message.)
     pub(super) fn copy_chunk(&mut self, chunk: &RawChunk) -> io::Result<()> {
+        let holds_no_message = chunk.index.message_index_offsets.is_empty()
+            && chunk.message_counts.values().all(|&count| count == 0);
+        if holds_no_message {
+            return Ok(());
+        }
         let chunk_start_offset = self.out.position();
         self.out.write_raw(&chunk.record)?;
         let indexes_start = self.out.position();

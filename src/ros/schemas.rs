@@ -47,20 +47,19 @@ impl RosDialect {
     }
 }
 
-fn dep(dialect: RosDialect, package: &str, type_name: &str, text: &str) -> String {
-    let name = match dialect {
-        RosDialect::Ros1 => format!("{package}/{type_name}"),
-        RosDialect::Ros2 => format!("{package}/msg/{type_name}"),
-    };
-    format!("{SEP}MSG: {name}\n{text}")
+/// A dependency's section. Its `MSG:` name is the type as the fields spell
+/// it, `package/Type` in both dialects (what `ros2 bag` writes): Foxglove's
+/// and Lichtblick's parser looks a field's type up by that exact name, and a
+/// ROS 2 `package/msg/Type` there hides the whole topic.
+fn dep(package: &str, type_name: &str, text: &str) -> String {
+    format!("{SEP}MSG: {package}/{type_name}\n{text}")
 }
 
 fn header_deps(dialect: RosDialect) -> String {
     match dialect {
-        RosDialect::Ros1 => dep(dialect, "std_msgs", "Header", HEADER_ROS1),
+        RosDialect::Ros1 => dep("std_msgs", "Header", HEADER_ROS1),
         RosDialect::Ros2 => {
-            dep(dialect, "std_msgs", "Header", HEADER_ROS2)
-                + &dep(dialect, "builtin_interfaces", "Time", TIME_ROS2)
+            dep("std_msgs", "Header", HEADER_ROS2) + &dep("builtin_interfaces", "Time", TIME_ROS2)
         }
     }
 }
@@ -70,7 +69,7 @@ pub fn point_cloud2(dialect: RosDialect) -> String {
     format!(
         "{main}{}{}",
         header_deps(dialect),
-        dep(dialect, "sensor_msgs", "PointField", POINT_FIELD)
+        dep("sensor_msgs", "PointField", POINT_FIELD)
     )
 }
 
@@ -79,8 +78,8 @@ pub fn imu(dialect: RosDialect) -> String {
     format!(
         "{main}{}{}{}",
         header_deps(dialect),
-        dep(dialect, "geometry_msgs", "Quaternion", QUATERNION),
-        dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
+        dep("geometry_msgs", "Quaternion", QUATERNION),
+        dep("geometry_msgs", "Vector3", VECTOR3)
     )
 }
 
@@ -90,12 +89,11 @@ pub fn twist_stamped(dialect: RosDialect) -> String {
         "{main}{}{}{}",
         header_deps(dialect),
         dep(
-            dialect,
             "geometry_msgs",
             "Twist",
             "Vector3  linear\nVector3  angular\n"
         ),
-        dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
+        dep("geometry_msgs", "Vector3", VECTOR3)
     )
 }
 
@@ -105,31 +103,27 @@ pub fn odometry(dialect: RosDialect) -> String {
         "{main}{}{}{}{}{}{}{}",
         header_deps(dialect),
         dep(
-            dialect,
             "geometry_msgs",
             "PoseWithCovariance",
             "Pose pose\nfloat64[36] covariance\n"
         ),
         dep(
-            dialect,
             "geometry_msgs",
             "Pose",
             "Point position\nQuaternion orientation\n"
         ),
-        dep(dialect, "geometry_msgs", "Point", POINT),
-        dep(dialect, "geometry_msgs", "Quaternion", QUATERNION),
+        dep("geometry_msgs", "Point", POINT),
+        dep("geometry_msgs", "Quaternion", QUATERNION),
         dep(
-            dialect,
             "geometry_msgs",
             "TwistWithCovariance",
             "Twist twist\nfloat64[36] covariance\n"
         ),
         dep(
-            dialect,
             "geometry_msgs",
             "Twist",
             "Vector3  linear\nVector3  angular\n"
-        ) + &dep(dialect, "geometry_msgs", "Vector3", VECTOR3)
+        ) + &dep("geometry_msgs", "Vector3", VECTOR3)
     )
 }
 
@@ -138,19 +132,17 @@ pub fn tf_message(dialect: RosDialect) -> String {
     format!(
         "{main}{}{}{}{}{}",
         dep(
-            dialect,
             "geometry_msgs",
             "TransformStamped",
             "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"
         ),
         header_deps(dialect),
         dep(
-            dialect,
             "geometry_msgs",
             "Transform",
             "Vector3 translation\nQuaternion rotation\n"
         ),
-        dep(dialect, "geometry_msgs", "Vector3", VECTOR3),
-        dep(dialect, "geometry_msgs", "Quaternion", QUATERNION)
+        dep("geometry_msgs", "Vector3", VECTOR3),
+        dep("geometry_msgs", "Quaternion", QUATERNION)
     )
 }

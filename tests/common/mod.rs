@@ -290,3 +290,4 @@ pub fn rewrite_mcap(
     }
     writer.finish().unwrap();
 }
+pub mod viewer;

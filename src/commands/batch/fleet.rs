@@ -21,6 +21,8 @@ pub const NEAR_MISSES_JSONL: &str = "near_misses.jsonl";
 pub const NEAR_MISSES_CSV: &str = "near_misses.csv";
 pub const NEAR_MISS_EVENTS_JSONL: &str = "near_miss_events.jsonl";
 pub const REPORT_HTML: &str = "report.html";
+/// The Foxglove / Lichtblick layout for the fleet's annotated logs.
+pub const LAYOUT_JSON: &str = "layout.json";
 
 /// One near miss in the fleet ranking.
 #[derive(Debug, Clone, Serialize)]
@@ -42,6 +44,9 @@ pub struct FleetNearMiss {
     /// (absent beyond a log's first [`super::MAX_PICTURED_EVENTS`]).
     pub range_picture: Option<PathBuf>,
     pub top_picture: Option<PathBuf>,
+    /// Its clip (`--clips`), relative to `OUT_DIR`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clip: Option<PathBuf>,
 }
 
 /// Every near miss of `records`, ranked: smallest time to contact first,
@@ -68,6 +73,11 @@ pub fn ranked_near_misses(records: &[LogRecord]) -> Vec<FleetNearMiss> {
                 moving: event.moving,
                 range_picture: pictures.map(|p| p.range_png.clone()),
                 top_picture: pictures.map(|p| p.top_png.clone()),
+                clip: record
+                    .clips
+                    .iter()
+                    .find(|c| c.event_id == event.id)
+                    .map(|c| c.path.clone()),
             }
         })
         .collect()
@@ -115,7 +125,30 @@ pub fn write_fleet_files(out_dir: &Path, records: &[LogRecord]) -> std::io::Resu
     let mut report = AtomicFile::create(&out_dir.join(REPORT_HTML))?;
     report.write_all(super::report::report_html(records, &near_misses).as_bytes())?;
     report.commit()?;
+    if let Some(target) = fleet_layout_target(records) {
+        crate::commands::layout::write_layout(&out_dir.join(LAYOUT_JSON), &target)
+            .map_err(std::io::Error::other)?;
+    }
     Ok(())
+}
+
+/// The layout for the fleet: the LiDAR frame most of its annotated logs
+/// use (ties: the first in name order); none without an annotated log.
+fn fleet_layout_target(records: &[LogRecord]) -> Option<crate::commands::layout::LayoutTarget> {
+    let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
+    for frame in records
+        .iter()
+        .filter_map(|r| r.entry.lidar_frame.as_deref())
+    {
+        *counts.entry(frame).or_default() += 1;
+    }
+    let most = counts.values().copied().max()?;
+    let frame = counts.into_iter().find(|&(_, n)| n == most)?.0;
+    Some(crate::commands::layout::LayoutTarget {
+        frame_id: frame.to_owned(),
+        lidar_topic: None,
+        frame_from: "the fleet's annotated logs".into(),
+    })
 }
 
 /// A near miss as a `foxglove.Event` in its JSON form (the schema's field
@@ -150,12 +183,12 @@ fn foxglove_event(rank: usize, record: &LogRecord, event: &NearMissEvent) -> ser
 /// The ranking as CSV (paths quoted).
 fn csv_text(near_misses: &[FleetNearMiss]) -> String {
     let mut text = String::from(
-        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture\n",
+        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture,clip\n",
     );
     let quoted = |path: &Path| format!("\"{}\"", path.display().to_string().replace('"', "\"\""));
     for n in near_misses {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{},{}\n",
             n.rank,
             quoted(&n.log),
             n.output.as_deref().map_or(String::new(), quoted),
@@ -171,6 +204,7 @@ fn csv_text(near_misses: &[FleetNearMiss]) -> String {
             n.moving,
             n.range_picture.as_deref().map_or(String::new(), quoted),
             n.top_picture.as_deref().map_or(String::new(), quoted),
+            n.clip.as_deref().map_or(String::new(), quoted),
         ));
     }
     text

@@ -19,13 +19,14 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 pub use fleet::{
-    FLEET_JSON, FleetNearMiss, NEAR_MISS_EVENTS_JSONL, NEAR_MISSES_CSV, NEAR_MISSES_JSONL,
-    REPORT_HTML,
+    FLEET_JSON, FleetNearMiss, LAYOUT_JSON, NEAR_MISS_EVENTS_JSONL, NEAR_MISSES_CSV,
+    NEAR_MISSES_JSONL, REPORT_HTML,
 };
 pub use inputs::{BatchLog, Shard, discover};
 pub use pictures::MAX_PICTURED_EVENTS;
 pub use record::{
-    EventPictures, FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus, PeakSeries,
+    EventClip, EventPictures, FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus,
+    PeakSeries,
 };
 
 use crate::output::remove_stale_temp_files;
@@ -51,6 +52,8 @@ pub struct BatchOptions {
     /// `process`'s configuration for every log (its input and output are
     /// set per log).
     pub process: ProcessConfig,
+    /// `--clips SECONDS`: a clip per near miss, this long before and after.
+    pub clips_margin_s: Option<f64>,
 }
 
 /// What this run did with a log.
@@ -136,7 +139,7 @@ pub fn run_batch(
     };
     let logs = plan(options)?;
     progress.start(logs.len());
-    let config_crc32 = config_fingerprint(&options.process);
+    let config_crc32 = config_fingerprint(&options.process, options.clips_margin_s);
     let next = AtomicUsize::new(0);
     let outcomes = Mutex::new(vec![None; logs.len()]);
     std::thread::scope(|scope| {
@@ -212,15 +215,21 @@ fn record_files_below(dir: &Path, found: &mut Vec<PathBuf>) -> std::io::Result<(
 }
 
 /// The configuration's fingerprint: what a log's record must match.
-fn config_fingerprint(config: &ProcessConfig) -> u32 {
+fn config_fingerprint(config: &ProcessConfig, clips_margin_s: Option<f64>) -> u32 {
     let mut template = config.clone();
     template.input = PathBuf::new();
     template.output = PathBuf::new();
-    crc32fast::hash(
-        serde_json::to_string(&template)
-            .unwrap_or_default()
-            .as_bytes(),
-    )
+    let mut text = serde_json::to_string(&template).unwrap_or_default();
+    // Without clips the fingerprint is the one earlier versions wrote.
+    if let Some(seconds) = clips_margin_s {
+        text.push_str(&format!(" clips {seconds}"));
+    }
+    crc32fast::hash(text.as_bytes())
+}
+
+/// The folder of a log's clips, relative to `OUT_DIR`.
+fn clips_dir(relative: &Path) -> PathBuf {
+    Path::new("clips").join(relative.with_extension(""))
 }
 
 /// Where a log's output and record go.
@@ -259,8 +268,9 @@ fn run_log(options: &BatchOptions, log: &BatchLog, config_crc32: u32) -> LogOutc
     // that log unwritten): clear it before the log is redone.
     let _ = remove_stale_temp_files(&output);
     let _ = remove_stale_temp_files(&record_path);
-    // Pictures of an earlier run's events must not outlive them.
+    // Pictures and clips of an earlier run's events must not outlive them.
     let _ = std::fs::remove_dir_all(options.out_dir.join(pictures::pictures_dir(&log.relative)));
+    let _ = std::fs::remove_dir_all(options.out_dir.join(clips_dir(&log.relative)));
     let record = process_log(options, log, &output, fingerprint, config_crc32);
     // An interrupted log is not remembered: the next run redoes it. A
     // record that cannot be written only costs a re-run next time.
@@ -291,6 +301,7 @@ fn unreadable(log: &BatchLog, reason: &str) -> LogOutcome {
             near_misses: Vec::new(),
             pictures: Vec::new(),
             peak_series: None,
+            clips: Vec::new(),
         },
         action: RunAction::Ran,
     }
@@ -314,6 +325,7 @@ fn entry(
         bad_messages: 0,
         seconds,
         quality: None,
+        lidar_frame: None,
     }
 }
 
@@ -342,6 +354,7 @@ fn process_log(
         near_misses: Vec::new(),
         pictures: Vec::new(),
         peak_series: None,
+        clips: Vec::new(),
     };
     match result {
         // `--if-no-lidar copy`: the log is copied, still skipped by policy.
@@ -394,6 +407,9 @@ fn describe_processed(
         }
         record.entry.quality = Some(fleet_quality(report));
     }
+    record.entry.lidar_frame = crate::commands::layout::target_of(output, None)
+        .ok()
+        .map(|target| target.frame_id);
     let drawn = pictures::draw_event_pictures(
         config,
         &log.input,
@@ -403,14 +419,53 @@ fn describe_processed(
     );
     match drawn {
         Ok(pictures) => record.pictures = pictures,
-        Err(error) => {
-            let said = format!("pictures not drawn: {error}");
-            record.entry.reason = Some(match record.entry.reason.take() {
-                Some(reason) => format!("{reason}; {said}"),
-                None => said,
-            });
+        Err(error) => add_reason(record, format!("pictures not drawn: {error}")),
+    }
+    if let Some(seconds) = options.clips_margin_s {
+        match write_log_clips(options, log, output, &record.near_misses, seconds) {
+            Ok(clips) => record.clips = clips,
+            Err(error) => add_reason(record, format!("clips not written: {error}")),
         }
     }
+}
+
+/// A log's clips, in `OUT_DIR/clips/<log without extension>/`.
+fn write_log_clips(
+    options: &BatchOptions,
+    log: &BatchLog,
+    output: &Path,
+    events: &[crate::events::NearMissEvent],
+    seconds: f64,
+) -> Result<Vec<record::EventClip>, crate::commands::clips::ClipError> {
+    let dir = clips_dir(&log.relative);
+    let stem = log
+        .relative
+        .file_stem()
+        .unwrap_or_default()
+        .to_string_lossy();
+    let written = crate::commands::clips::write_clips(
+        output,
+        events,
+        &options.out_dir.join(&dir),
+        &stem,
+        seconds,
+        true,
+    )?;
+    Ok(written
+        .into_iter()
+        .map(|clip| record::EventClip {
+            event_id: clip.event_id,
+            path: dir.join(clip.path.file_name().unwrap_or_default()),
+        })
+        .collect())
+}
+
+/// Say `said` in the log's reason (it stays processed).
+fn add_reason(record: &mut LogRecord, said: String) {
+    record.entry.reason = Some(match record.entry.reason.take() {
+        Some(reason) => format!("{reason}; {said}"),
+        None => said,
+    });
 }
 
 /// The quality figures of an annotated log that the fleet table shows.

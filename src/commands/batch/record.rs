@@ -83,6 +83,9 @@ pub struct FleetEntry {
     pub seconds: f64,
     /// The `looming quality` figures of the annotated log.
     pub quality: Option<FleetQuality>,
+    /// The frame of its LiDAR clouds (what a viewer's 3D panel follows).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lidar_frame: Option<String>,
 }
 
 /// The quality figures of a log that say whether to trust it
@@ -135,6 +138,17 @@ pub struct LogRecord {
     /// For a log with near misses, its path peak over time.
     #[serde(default)]
     pub peak_series: Option<PeakSeries>,
+    /// With `--clips`: a clip per near miss, paths relative to `OUT_DIR`.
+    #[serde(default)]
+    pub clips: Vec<EventClip>,
+}
+
+/// A near miss's clip (`batch --clips`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventClip {
+    pub event_id: u32,
+    /// Relative to `OUT_DIR`.
+    pub path: PathBuf,
 }
 
 impl LogRecord {
@@ -173,5 +187,6 @@ impl LogRecord {
                 .pictures
                 .iter()
                 .all(|p| out_dir.join(&p.range_png).exists() && out_dir.join(&p.top_png).exists())
+            && self.clips.iter().all(|c| out_dir.join(&c.path).exists())
     }
 }

@@ -78,7 +78,7 @@ fn write_near_misses(html: &mut String, records: &[LogRecord], near_misses: &[Fl
             html,
             "<tr id=\"near-miss-{}\"><td class=\"n\">{}</td><td class=\"n\"><b>{:.2}</b></td>\
              <td class=\"n\">{:.2}</td><td class=\"n\">{:.1}</td><td>{}</td><td class=\"n\">{}</td>\
-             <td>{}</td><td>{}<br>event #{}, {}</td><td>{}{}</td></tr>",
+             <td>{}</td><td>{}<br>event #{}, {}{}</td><td>{}{}</td></tr>",
             n.rank,
             n.rank,
             n.min_time_to_contact_s,
@@ -95,6 +95,7 @@ fn write_near_misses(html: &mut String, records: &[LogRecord], near_misses: &[Fl
             escape(&n.log.display().to_string()),
             n.event_id,
             when(records, n),
+            clip_link(n.clip.as_deref()),
             picture(n.range_picture.as_deref(), "range image"),
             picture(n.top_picture.as_deref(), "top view"),
         );
@@ -134,6 +135,16 @@ fn bearing(azimuth_deg: f64) -> String {
         a if a < -2.0 => format!("{:.0}&deg; right", -a),
         _ => "ahead".to_owned(),
     }
+}
+
+/// A link to the near miss's clip (open it in Foxglove or Lichtblick).
+fn clip_link(path: Option<&Path>) -> String {
+    path.map_or(String::new(), |path| {
+        format!(
+            "<br><a class=\"clip\" href=\"{}\" download>clip (MCAP)</a>",
+            escape(&url_path(path))
+        )
+    })
 }
 
 /// An image linking to itself at full size (paths relative to the page).

@@ -452,6 +452,8 @@ pub struct Writer<W: Write + Seek> {
     message_bounds: Option<(u64, u64)>,
     channel_message_counts: BTreeMap<u16, u64>,
     reusable_zstd_encoder: ReusableZstdEncoder,
+    /// Schema and channel records waiting for a message to open a chunk (LOOMING patch).
+    pending_chunk_records: Vec<Record<'static>>,
 }
 
 impl<W: Write + Seek> Writer<W> {
@@ -509,6 +511,7 @@ impl<W: Write + Seek> Writer<W> {
             message_bounds: None,
             channel_message_counts: BTreeMap::new(),
             reusable_zstd_encoder: Default::default(),
+            pending_chunk_records: Vec::new(),
         })
     }
 
@@ -626,13 +629,26 @@ impl<W: Write + Seek> Writer<W> {
                 name: schema.name,
                 encoding: schema.encoding,
             },
-            data: schema.data,
+            data: Cow::Owned(schema.data.into_owned()),
         };
-        if self.options.use_chunks {
-            self.start_chunk()?.write_record(&record)
-        } else {
-            Ok(write_record(&mut self.finish_chunk()?, &record)?)
+        self.write_chunkable_record(record)
+    }
+
+    /// A schema or channel record. Chunked files put it in the open chunk, or, with no chunk
+    /// open, keep it until the next message opens one (LOOMING patch): a chunk holding no
+    /// message would get a chunk index whose message start and end time are 0, which viewers
+    /// take as the start of the whole log. Metadata and attachments written meanwhile do not
+    /// close a chunk for them; records that no message follows are written outside any chunk
+    /// by [`Self::finish`].
+    fn write_chunkable_record(&mut self, record: Record<'static>) -> McapResult<()> {
+        if !self.options.use_chunks {
+            return Ok(write_record(self.finish_chunk()?, &record)?);
         }
+        if matches!(self.writer, Some(WriteMode::Chunk(_))) {
+            return self.start_chunk()?.write_record(&record);
+        }
+        self.pending_chunk_records.push(record);
+        Ok(())
     }
 
     /// Adds a channel, returning its ID. If a channel with equivalent content was added previously,
@@ -760,12 +776,7 @@ impl<W: Write + Seek> Writer<W> {
 
     /// Write a channel record into the MCAP.
     fn write_channel(&mut self, channel: records::Channel) -> McapResult<()> {
-        let record = Record::Channel(channel);
-        if self.options.use_chunks {
-            self.start_chunk()?.write_record(&record)
-        } else {
-            Ok(write_record(self.finish_chunk()?, &record)?)
-        }
+        self.write_chunkable_record(Record::Channel(channel))
     }
 
     /// Write the given message (and its provided channel, if not already added).
@@ -889,7 +900,12 @@ impl<W: Write + Seek> Writer<W> {
         }
 
         if self.options.use_chunks {
-            self.start_chunk()?.write_message(header, data)?;
+            let pending = take(&mut self.pending_chunk_records);
+            let chunk = self.start_chunk()?;
+            for record in &pending {
+                chunk.write_record(record)?;
+            }
+            chunk.write_message(header, data)?;
         } else {
             write_record(
                 self.finish_chunk()?,
@@ -1228,7 +1244,6 @@ impl<W: Write + Seek> Writer<W> {
         let Some(WriteMode::Raw(w)) = &mut self.writer else {
             unreachable!("we're not in an attachment and write mode raw was set above")
         };
-
         Ok(w)
     }
 
@@ -1243,7 +1258,13 @@ impl<W: Write + Seek> Writer<W> {
             return Ok(summary.clone());
         }
         // Finish any chunk we were working on and update stats, indexes, etc.
-        self.finish_chunk()?;
+        let pending = take(&mut self.pending_chunk_records);
+        let w = self.finish_chunk()?;
+        // Schema and channel records no message followed (LOOMING patch): outside any chunk,
+        // where the specification allows them.
+        for record in &pending {
+            write_record(w, record)?;
+        }
         // finish_chunk() just handed back the last chunk's zstd encoder (and its worker
         // thread pool, if any) into reusable_zstd_encoder for the next chunk to reinit.
         // There is no next chunk -- finish() means we're done, so nothing can legally

@@ -131,6 +131,7 @@ pub struct EventPeak {
     /// Smallest distance of the cluster from the ego path, metres.
     pub lateral_offset_m: f64,
     /// LiDAR speed, m/s (absent without a velocity source).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ego_speed_mps: Option<f64>,
     pub cluster_cells: usize,
 }
