@@ -10,7 +10,7 @@
 //! ([`pipeline::replay()`]). [`commands`] holds the other commands; [`synth`]
 //! and [`kitti`] write logs. `docs/ARCHITECTURE.md` draws the layers.
 
-pub use looming_core::{engine, events, model, pairing};
+pub use looming_core::{engine, events, model, objects, pairing};
 
 pub mod annotate;
 pub mod budget;

@@ -18,20 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::engine::{PairLooming, ThreatLevel, mask};
 use crate::model::Scan;
-
-/// Largest angle between a ground cell's normal and the LiDAR's z axis.
-pub(crate) const GROUND_MAX_TILT_DEG: f64 = 15.0;
-/// First pass: distance from the dominant ground height allowed at the
-/// sensor, metres, ...
-pub(crate) const GROUND_HEIGHT_TOLERANCE_M: f64 = 0.3;
-/// ... growing by this much per metre of horizontal distance (a 3 degree
-/// tilt or slope).
-pub(crate) const GROUND_HEIGHT_TOLERANCE_PER_M: f64 = 0.05;
-/// Second pass: distance from the plane fitted through the first pass.
-pub(crate) const GROUND_PLANE_TOLERANCE_M: f64 = 0.15;
-pub(crate) const GROUND_PLANE_TOLERANCE_PER_M: f64 = 0.02;
-/// Fewest first-pass cells to fit a plane through.
-const MIN_PLANE_CELLS: usize = 30;
+use crate::objects::ground::GroundFit;
 
 /// Why occupied cells are masked: cells per `engine::mask` bit (a cell may
 /// carry several bits; empty cells are not counted).
@@ -309,6 +296,24 @@ pub struct PairQuality {
     /// m (all zero when it found none; empty in logs written before it).
     #[serde(default)]
     pub range_offset_m_per_ring: Vec<f32>,
+    /// Objects found in the pair (`/looming/objects`), and those with a
+    /// looming (0 in logs written before objects).
+    #[serde(default)]
+    pub objects: u64,
+    #[serde(default)]
+    pub objects_with_looming: u64,
+}
+
+impl PairQuality {
+    /// Count the pair's objects.
+    pub fn count_objects(&mut self, objects: &crate::objects::PairObjects) {
+        self.objects = objects.objects.len() as u64;
+        self.objects_with_looming = objects
+            .objects
+            .iter()
+            .filter(|o| o.looming_per_s.is_some())
+            .count() as u64;
+    }
 }
 
 fn ratio(part: u64, whole: u64) -> Option<f64> {
@@ -403,78 +408,20 @@ impl PairQuality {
             range_noise_m_per_ring: looming.range_noise_m_per_row.clone(),
             path_peak_looming_per_s: None,
             range_offset_m_per_ring: looming.range_bias_m_per_row.clone(),
+            objects: 0,
+            objects_with_looming: 0,
         }
     }
 }
 
-/// Position of each occupied cell's return (`None` for empty cells).
-fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f64; 3]> {
-    if looming.mask[cell] & mask::EMPTY != 0 {
-        return None;
-    }
-    let index = *looming.image.point.get(cell)?;
-    let p = scan.points_m.get(index as usize)?;
-    Some([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-}
-
-/// Cells that may be ground: an upward normal within `GROUND_MAX_TILT_DEG` of
-/// z, and the return below the sensor.
-fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3])> {
-    let min_cos = GROUND_MAX_TILT_DEG.to_radians().cos();
-    (0..looming.mask.len())
-        .filter_map(|cell| {
-            let p = cell_point(looming, scan, cell)?;
-            let n = looming.normal.get(cell)?;
-            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
-            (upward && p[2] < 0.0).then_some((cell, p))
-        })
-        .collect()
-}
-
-/// Least-squares plane `z = a x + b y + c` through the points.
-fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    let mut v = nalgebra::Vector3::<f64>::zeros();
-    for p in points {
-        let row = nalgebra::Vector3::new(p[0], p[1], 1.0);
-        m += row * row.transpose();
-        v += row * p[2];
-    }
-    let solution = m.try_inverse()? * v;
-    solution
-        .iter()
-        .all(|x| x.is_finite())
-        .then(|| [solution[0], solution[1], solution[2]])
-}
-
 fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
-    let candidates = ground_candidates(looming, scan);
-    let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
-    let Some(height) = median(&mut heights) else {
+    let Some(GroundFit {
+        height_m: height,
+        plane,
+        cells: ground,
+    }) = GroundFit::find(looming, scan)
+    else {
         return GroundQuality::default();
-    };
-    let horizontal = |p: &[f64; 3]| p[0].hypot(p[1]);
-    let near_height: Vec<&(usize, [f64; 3])> = candidates
-        .iter()
-        .filter(|(_, p)| {
-            (p[2] - height).abs()
-                <= GROUND_HEIGHT_TOLERANCE_M + GROUND_HEIGHT_TOLERANCE_PER_M * horizontal(p)
-        })
-        .collect();
-    let plane = (near_height.len() >= MIN_PLANE_CELLS)
-        .then(|| fit_plane(&near_height.iter().map(|(_, p)| *p).collect::<Vec<_>>()))
-        .flatten();
-    let ground: Vec<(usize, [f64; 3])> = match plane {
-        Some([a, b, c]) => candidates
-            .iter()
-            .filter(|(_, p)| {
-                (p[2] - (a * p[0] + b * p[1] + c)).abs()
-                    <= GROUND_PLANE_TOLERANCE_M + GROUND_PLANE_TOLERANCE_PER_M * horizontal(p)
-            })
-            .copied()
-            .collect(),
-        None => near_height.into_iter().copied().collect(),
     };
     let ego = looming.availability.ego_velocity;
     let mut abs_fused = Vec::new();

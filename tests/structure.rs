@@ -20,6 +20,7 @@ const LAYERS: &[(&str, u32)] = &[
     ("engine", 1),
     // Pure stages and readers of bytes into the model.
     ("events", 2),
+    ("objects", 2),
     ("pairing", 2),
     ("quality", 2),
     ("ros", 2),
@@ -51,12 +52,14 @@ const SIBLING_USES: &[(&str, &str)] = &[
     // calls the readers.
     ("ros", "decode"),
     ("decode", "ros"),
-    // Per-pair quality figures are measured on the detector's events too.
+    // Per-pair quality figures are measured on the detector's events too,
+    // and on the ground the objects stand on.
     ("quality", "events"),
+    ("quality", "objects"),
 ];
 
 /// Modules that must do no I/O: the math and the plain data.
-const PURE: &[&str] = &["model", "engine", "events", "pairing", "quality"];
+const PURE: &[&str] = &["model", "engine", "events", "objects", "pairing", "quality"];
 
 /// What I/O looks like in code.
 const IO_MARKERS: &[&str] = &[

@@ -21,7 +21,8 @@ pub enum FieldSet {
     /// x, y, z, the fused looming and its colour.
     #[default]
     Default,
-    /// Also L_lidar, L_ego, L_ray_ego, D, confidence, threat level and mask.
+    /// Also L_lidar, L_ego, L_ray_ego, D, confidence, threat level, mask and
+    /// the id of the point's object (0: none).
     Full,
 }
 
@@ -89,6 +90,10 @@ impl Packer {
     }
     fn u8(&mut self, value: u8) -> &mut Self {
         self.data.push(value);
+        self
+    }
+    fn u32(&mut self, value: u32) -> &mut Self {
+        self.data.extend_from_slice(&value.to_le_bytes());
         self
     }
     /// Positions rounded to [`POSITION_QUANTUM_M`].
@@ -164,7 +169,12 @@ fn quantized(looming_per_s: f32) -> f32 {
 
 /// `/looming/points`: every point of the scan with its fused looming (NaN
 /// where untrusted) and colour.
-pub(crate) fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet) -> PointCloud {
+pub(crate) fn looming_cloud(
+    scan: &Scan,
+    looming: &PairLooming,
+    objects: &crate::objects::PairObjects,
+    fields: FieldSet,
+) -> PointCloud {
     let mut layout = Layout::xyz().add("looming", NumericType::Float32).rgba();
     if fields == FieldSet::Full {
         layout = layout
@@ -174,7 +184,8 @@ pub(crate) fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet
             .add("disagreement", NumericType::Float32)
             .add("confidence", NumericType::Float32)
             .add("threat", NumericType::Uint8)
-            .add("mask", NumericType::Uint8);
+            .add("mask", NumericType::Uint8)
+            .add("object_id", NumericType::Uint32);
     }
     let mut out = Packer::with_points(layout.stride, scan.points_m.len());
     for (index, p) in scan.points_m.iter().enumerate() {
@@ -190,7 +201,8 @@ pub(crate) fn looming_cloud(scan: &Scan, looming: &PairLooming, fields: FieldSet
                 .f32(at(&looming.disagreement))
                 .f32(at(&looming.confidence))
                 .u8(looming.point_threat[index] as u8)
-                .u8(cell.map_or(crate::engine::mask::EMPTY, |c| looming.mask[c]));
+                .u8(cell.map_or(crate::engine::mask::EMPTY, |c| looming.mask[c]))
+                .u32(objects.object_of_point(looming, index).unwrap_or(0));
         }
     }
     cloud(scan, layout, out.data)

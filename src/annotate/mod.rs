@@ -5,6 +5,7 @@
 
 pub mod colour;
 pub mod foxglove;
+pub mod objects;
 pub mod pairs;
 pub mod topics;
 
@@ -16,6 +17,7 @@ use prost::Message;
 use crate::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
 use crate::events::{EVENT_SCHEMA, EventConfig, EventDetector, NearMissEvent, PairFrame};
 use crate::model::ScanPair;
+use crate::objects::{ObjectConfig, ObjectTracker, PairObjects};
 use crate::output::OwnChannelSpec;
 use crate::quality::PairQuality;
 
@@ -23,7 +25,8 @@ pub use self::foxglove::FieldSet;
 
 pub use self::topics::{
     DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
-    NEAR_MISSES_TOPIC, POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
+    NEAR_MISSES_TOPIC, OBJECT_LIST_TOPIC, OBJECTS_TOPIC, POINTS_TOPIC, THREAT_TOPIC,
+    THREAT_ZONES_TOPIC,
 };
 
 /// Settings of the annotation stage.
@@ -32,6 +35,7 @@ pub struct AnnotateConfig {
     pub engine: EngineConfig,
     pub events: EventConfig,
     pub fields: FieldSet,
+    pub objects: ObjectConfig,
 }
 
 /// One of our channels, in the order they are registered (the discriminant
@@ -47,10 +51,12 @@ enum Channel {
     Events,
     Log,
     NearMisses,
+    Objects,
+    ObjectList,
 }
 
 /// How many channels the stage writes.
-const CHANNEL_COUNT: usize = 9;
+const CHANNEL_COUNT: usize = 11;
 
 const CHANNELS: [Channel; CHANNEL_COUNT] = [
     Channel::Points,
@@ -62,6 +68,8 @@ const CHANNELS: [Channel; CHANNEL_COUNT] = [
     Channel::Events,
     Channel::Log,
     Channel::NearMisses,
+    Channel::Objects,
+    Channel::ObjectList,
 ];
 
 /// Channel and schema of a Foxglove protobuf message type.
@@ -93,6 +101,12 @@ impl Channel {
             }
             Channel::Log => protobuf_spec::<Log>(LOG_TOPIC),
             Channel::NearMisses => protobuf_spec::<Event>(NEAR_MISSES_TOPIC),
+            Channel::Objects => protobuf_spec::<SceneUpdate>(OBJECTS_TOPIC),
+            Channel::ObjectList => OwnChannelSpec::json(
+                OBJECT_LIST_TOPIC,
+                "looming.ObjectList",
+                objects::OBJECT_LIST_SCHEMA,
+            ),
         }
     }
 }
@@ -147,6 +161,7 @@ pub struct Annotator {
     events: Vec<NearMissEvent>,
     stats: AnnotateStats,
     quality: Option<PairQuality>,
+    tracker: ObjectTracker,
 }
 
 impl Annotator {
@@ -163,6 +178,7 @@ impl Annotator {
             events: Vec::new(),
             stats: AnnotateStats::default(),
             quality: None,
+            tracker: ObjectTracker::default(),
         }
     }
 
@@ -192,7 +208,12 @@ impl Annotator {
             self.stats.pairs_without_image += 1;
             return Vec::new();
         };
+        let mut objects = PairObjects::find(&pair.current, &looming, &self.config.objects);
+        self.tracker.update(&mut objects, &looming, pair.dt_s);
         self.quality = Some(PairQuality::measure(&looming, &pair.current));
+        if let Some(quality) = &mut self.quality {
+            quality.count_objects(&objects);
+        }
         self.stats.pairs_annotated += 1;
         if !looming.availability.ego_velocity {
             self.stats.pairs_lidar_only += 1;
@@ -212,7 +233,7 @@ impl Annotator {
         for event in ended {
             self.push_event(event, &mut out);
         }
-        self.push_scan_messages(pair, &looming, &mut out);
+        self.push_scan_messages(pair, &looming, &objects, &mut out);
         out
     }
 
@@ -229,6 +250,7 @@ impl Annotator {
         &mut self,
         pair: &ScanPair,
         looming: &PairLooming,
+        objects: &PairObjects,
         out: &mut Vec<OwnMessage>,
     ) {
         let scan = &*pair.current;
@@ -239,7 +261,7 @@ impl Annotator {
         let ((points, disagreement), (threat, images)) = rayon::join(
             || {
                 rayon::join(
-                    || foxglove::looming_cloud(scan, looming, fields),
+                    || foxglove::looming_cloud(scan, looming, objects, fields),
                     || foxglove::disagreement_cloud(scan, looming),
                 )
             },
@@ -273,6 +295,12 @@ impl Annotator {
             zones.encode_to_vec(),
             out,
         );
+        let ttc_s = &self.config.engine.threat_ttc_s;
+        let scene = objects::object_scene(scan, objects, ttc_s);
+        let list = objects::object_list(scan, objects, ttc_s);
+        self.push(Channel::Objects, log_time_ns, scene.encode_to_vec(), out);
+        let json = serde_json::to_vec(&list).expect("object lists always serialise");
+        self.push(Channel::ObjectList, log_time_ns, json, out);
         let (fused_image, disagreement_image) = images;
         for (channel, image) in [
             (Channel::ImageFused, fused_image),

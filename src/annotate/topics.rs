@@ -15,6 +15,8 @@ pub const IMAGE_DISAGREEMENT_TOPIC: &str = "/looming/image/disagreement";
 pub const EVENTS_TOPIC: &str = "/looming/events";
 pub const LOG_TOPIC: &str = "/looming/log";
 pub const NEAR_MISSES_TOPIC: &str = "/looming/near_misses";
+pub const OBJECTS_TOPIC: &str = "/looming/objects";
+pub const OBJECT_LIST_TOPIC: &str = "/looming/object_list";
 
 /// A channel written by `looming process` (never an input of it).
 pub fn is_ours(topic: &str) -> bool {
@@ -38,6 +40,8 @@ mod tests {
             EVENTS_TOPIC,
             LOG_TOPIC,
             NEAR_MISSES_TOPIC,
+            OBJECTS_TOPIC,
+            OBJECT_LIST_TOPIC,
         ] {
             assert!(is_ours(topic), "{topic}");
         }

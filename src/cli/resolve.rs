@@ -134,6 +134,7 @@ fn annotate_config(args: &AnnotateArgs) -> Result<AnnotateConfig, Failure> {
         },
         events: event_config(args)?,
         fields: args.fields.into(),
+        objects: looming::objects::ObjectConfig::default(),
     })
 }
 

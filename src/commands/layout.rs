@@ -1,9 +1,10 @@
 //! `looming layout`: a Foxglove / Lichtblick layout for an annotated log.
 //!
-//! The 3D panel follows the log's own LiDAR frame (`lidar` in `synth` logs,
-//! `velo_link` in KITTI: a fixed name would leave real logs in a wrong view),
-//! found from the first `/looming/pairs` message of an annotated log, else
-//! from the first cloud of its LiDAR topic. Below it the two looming range
+//! The 3D panel, with the clouds, the objects' boxes and the threat zones,
+//! follows the log's own LiDAR frame (`lidar` in `synth` logs, `velo_link`
+//! in KITTI: a fixed name would leave real logs in a wrong view), found from
+//! the first `/looming/pairs` message of an annotated log, else from the
+//! first cloud of its LiDAR topic. Below it the two looming range
 //! images, each the full width of the window (a 64 x 2048 image is drawn
 //! 4 pixels per beam, 8:1, so a full-width panel shows every beam); beside it
 //! the near-miss events (Raw Messages) and their log lines.
@@ -15,7 +16,7 @@ use serde_json::{Value, json};
 
 use crate::annotate::topics::{
     DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
-    PAIRS_TOPIC, POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
+    OBJECTS_TOPIC, PAIRS_TOPIC, POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
 };
 use crate::decode::{DecodeLimits, decode};
 use crate::input::{InputError, InputFile, InputOptions, InputRecord};
@@ -194,6 +195,8 @@ fn three_d_panel(target: &LayoutTarget) -> Value {
     topics.insert(DISAGREEMENT_TOPIC.into(), cloud(5.0, true));
     topics.insert(THREAT_TOPIC.into(), cloud(4.0, false));
     topics.insert(THREAT_ZONES_TOPIC.into(), json!({ "visible": true }));
+    // A box per object, coloured by threat, labelled with its id and TTC.
+    topics.insert(OBJECTS_TOPIC.into(), json!({ "visible": true }));
     json!({
         "cameraState": {
             "distance": 40,

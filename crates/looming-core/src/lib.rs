@@ -8,12 +8,16 @@
 //!   log-time order, into synchronised scan pairs.
 //! - [`engine`]: [`engine::compute`] / [`engine::compute_with_cache`] turn a
 //!   pair into per-cell and per-point looming ([`engine::PairLooming`]).
+//! - [`objects`]: [`objects::PairObjects::find`] groups a result's
+//!   non-ground returns into objects with their looming, and
+//!   [`objects::ObjectTracker`] follows them across pairs.
 //! - [`events`]: [`events::EventDetector`] turns a stream of results into
 //!   near-miss events.
 
 pub mod engine;
 pub mod events;
 pub mod model;
+pub mod objects;
 pub mod pairing;
 
 // A small seeded generator for the unit tests of this crate and of `looming`.

@@ -1,0 +1,208 @@
+//! Each object's figures: where it is, how big, and its looming, measured on
+//! every cell that holds a measurement of its range along the ray.
+//!
+//! A cell measures the object's approach when it has a previous surface
+//! along its ray and met the same surface there (no `EMPTY`, `NO_PREVIOUS`,
+//! `OCCLUSION` or `GRAZING` bit) and faces the sensor (`|n . e| >= 0.5`: near
+//! grazing the range along a ray changes fast without anything
+//! approaching); an object with fewer than three such cells (seen side-on)
+//! takes its cells short of grazing instead. `EDGE` does not exclude a cell: a crease or an edge of a car's rear still
+//! measures its range. The looming is the weighted median of those cells'
+//! `L_lidar`, each weighted by `1 / sigma_L^2` (the engine's noise of that
+//! cell), which a few wrong cells (a silhouette, a reflection) cannot move;
+//! its standard error is `1.4826` times the weighted median absolute
+//! deviation over the square root of the effective number of cells.
+
+use super::ground::cell_point;
+use super::{NO_OBJECT, Object};
+use crate::engine::{PairLooming, mask};
+use crate::model::Scan;
+
+/// Cells facing the sensor at least this much measure the approach ...
+const MIN_FACING_COS: f32 = 0.5;
+/// ... or, on an object without three such cells, those short of grazing
+/// (the engine's `GRAZING` bit: `|n . e| < 0.15`).
+const MIN_SIDE_ON_COS: f32 = 0.15;
+/// Fewest measured cells for a looming.
+const MIN_MEASURED_CELLS: usize = 3;
+/// `|D|` must exceed this many standard errors, and ...
+const MOVING_SIGMAS: f64 = 4.0;
+/// ... this much, for a moving object, 1/s (the cells' own rule).
+const MOVING_MIN_PER_S: f64 = 0.15;
+
+/// The figures of every object labelled in `cell_object` (ids 0: not yet
+/// tracked).
+pub fn measure_objects(scan: &Scan, looming: &PairLooming, cell_object: &[u32]) -> Vec<Object> {
+    let count = cell_object
+        .iter()
+        .filter(|&&o| o != NO_OBJECT)
+        .map(|&o| o as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut cells: Vec<Vec<usize>> = vec![Vec::new(); count];
+    for (cell, &object) in cell_object.iter().enumerate() {
+        if object != NO_OBJECT {
+            cells[object as usize].push(cell);
+        }
+    }
+    let mut points = vec![0usize; count];
+    for &cell in &looming.image.point_surface {
+        if cell != crate::engine::NO_POINT
+            && let Some(&object) = cell_object.get(cell as usize)
+            && object != NO_OBJECT
+        {
+            points[object as usize] += 1;
+        }
+    }
+    cells
+        .iter()
+        .zip(points)
+        .map(|(cells, points)| Object {
+            points,
+            ..measure(scan, looming, cells)
+        })
+        .collect()
+}
+
+fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize]) -> Object {
+    let points: Vec<[f64; 3]> = cells
+        .iter()
+        .filter_map(|&c| cell_point(looming, scan, c))
+        .collect();
+    let mut ranges: Vec<f64> = points
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .collect();
+    ranges.sort_by(f64::total_cmp);
+    let nearest_range_m = ranges
+        .get((ranges.len().saturating_sub(1)) / 10)
+        .copied()
+        .unwrap_or(f64::NAN);
+    let n = points.len().max(1) as f64;
+    let mut centroid_m = [0.0; 3];
+    let mut min_m = [f64::INFINITY; 3];
+    let mut max_m = [f64::NEG_INFINITY; 3];
+    for p in &points {
+        for k in 0..3 {
+            centroid_m[k] += p[k] / n;
+            min_m[k] = min_m[k].min(p[k]);
+            max_m[k] = max_m[k].max(p[k]);
+        }
+    }
+    let mut measured: Vec<usize> = cells
+        .iter()
+        .copied()
+        .filter(|&c| measures_approach(looming, c, MIN_FACING_COS))
+        .collect();
+    if measured.len() < MIN_MEASURED_CELLS {
+        // An object seen side-on (a wall along the road, a car beside the
+        // path) has no face towards the sensor: its cells short of grazing
+        // still measure how fast the free space along their rays shrinks.
+        measured = cells
+            .iter()
+            .copied()
+            .filter(|&c| measures_approach(looming, c, MIN_SIDE_ON_COS))
+            .collect();
+    }
+    let looming_fit = robust_mean(&measured, &looming.l_lidar, &looming.sigma_per_s);
+    let disagreement_fit = looming
+        .availability
+        .ego_velocity
+        .then(|| robust_mean(&measured, &looming.disagreement, &looming.sigma_per_s))
+        .flatten();
+    let moving = disagreement_fit
+        .is_some_and(|(d, se)| d.abs() > (MOVING_SIGMAS * se).max(MOVING_MIN_PER_S));
+    let looming_per_s = looming_fit.map(|(l, _)| l);
+    Object {
+        id: 0,
+        age_pairs: 0,
+        cells: cells.len(),
+        points: 0,
+        nearest_range_m,
+        centroid_m,
+        min_m,
+        max_m,
+        bearing_deg: centroid_m[1].atan2(centroid_m[0]).to_degrees(),
+        looming_per_s,
+        looming_se_per_s: looming_fit.map(|(_, se)| se),
+        measured_cells: measured.len(),
+        time_to_contact_s: looming_per_s.filter(|&l| l > 0.0).map(|l| 1.0 / l),
+        disagreement_per_s: disagreement_fit.map(|(d, _)| d),
+        moving,
+    }
+}
+
+/// Whether a cell's `L_lidar` measures its surface's approach, seen at
+/// least `min_cos` from grazing.
+fn measures_approach(looming: &PairLooming, cell: usize, min_cos: f32) -> bool {
+    let invalid = mask::EMPTY | mask::NO_PREVIOUS | mask::OCCLUSION | mask::GRAZING;
+    looming.mask[cell] & invalid == 0
+        && looming.incidence_cos[cell].abs() >= min_cos
+        && looming.l_lidar[cell].is_finite()
+        && looming.sigma_per_s[cell].is_finite()
+}
+
+/// Inverse-variance weighted median of `values` over `cells`, and its
+/// standard error; `None` with fewer than [`MIN_MEASURED_CELLS`] cells.
+fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, f64)> {
+    let mut weighted: Vec<(f64, f64)> = cells
+        .iter()
+        .filter(|&&c| values[c].is_finite())
+        .map(|&c| {
+            let sigma = f64::from(sigmas[c]).max(1e-3);
+            (f64::from(values[c]), 1.0 / (sigma * sigma))
+        })
+        .collect();
+    if weighted.len() < MIN_MEASURED_CELLS {
+        return None;
+    }
+    let centre = weighted_median(&mut weighted);
+    let mut deviations: Vec<(f64, f64)> = weighted
+        .iter()
+        .map(|&(v, w)| ((v - centre).abs(), w))
+        .collect();
+    let mad = weighted_median(&mut deviations);
+    let (sum_w, sum_w2) = weighted
+        .iter()
+        .fold((0.0, 0.0), |(s, s2), &(_, w)| (s + w, s2 + w * w));
+    let effective = sum_w * sum_w / sum_w2;
+    // The spread of the cells, and at least the engine's own noise.
+    let noise = (1.0 / sum_w).sqrt();
+    let se = (1.4826 * mad / effective.sqrt()).max(noise);
+    Some((centre, se))
+}
+
+/// The value at which half the weight lies on either side.
+fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
+    values.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let half = values.iter().map(|v| v.1).sum::<f64>() / 2.0;
+    let mut seen = 0.0;
+    for &(value, weight) in values.iter() {
+        seen += weight;
+        if seen >= half {
+            return value;
+        }
+    }
+    values.last().map_or(f64::NAN, |v| v.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_weighted_median_ignores_a_few_wild_cells() {
+        let values = [0.10f32, 0.11, 0.09, 0.10, 0.12, 5.0, -4.0];
+        let sigmas = [0.02f32; 7];
+        let cells: Vec<usize> = (0..7).collect();
+        let (centre, se) = robust_mean(&cells, &values, &sigmas).unwrap();
+        assert!((centre - 0.10).abs() < 0.011, "{centre}");
+        assert!(se < 0.02, "{se}");
+        // A precise cell outweighs noisy ones.
+        let sigmas = [0.01f32, 0.2, 0.2, 0.2, 0.2, 0.2, 0.2];
+        let values = [0.3f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let (precise, _) = robust_mean(&cells, &values, &sigmas).unwrap();
+        assert!((precise - 0.3).abs() < 1e-6, "{precise}");
+        assert_eq!(robust_mean(&cells[..2], &values, &sigmas), None);
+    }
+}

@@ -1,0 +1,123 @@
+//! Objects: the non-ground returns of a scan pair grouped into objects
+//! ([`segment`]), each with its looming measured robustly from all of its
+//! cells that hold a measurement ([`measure`]), followed across pairs under a
+//! stable id ([`ObjectTracker`]). Pure computation on the engine's result.
+//!
+//! What a fleet engineer judges is the car ahead, a wall, a person, not a
+//! cell: a cell's fused looming is often masked on a real object (a car's
+//! rear face is edges and creases for the crease test), while the object's
+//! `L_lidar` cells still carry range information. The object's looming is the
+//! inverse-variance weighted median of `L_lidar` over its cells that face the
+//! sensor and have a previous surface along their ray, with a standard error
+//! from the weighted spread.
+
+pub mod ground;
+mod measure;
+mod segment;
+mod track;
+
+pub use measure::measure_objects;
+pub use segment::segment;
+pub use track::ObjectTracker;
+
+use serde::{Deserialize, Serialize};
+
+use crate::engine::PairLooming;
+use crate::model::Scan;
+
+/// No object (in [`PairObjects::cell_object`]).
+pub const NO_OBJECT: u32 = u32::MAX;
+
+/// How objects are found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObjectConfig {
+    /// A return this far above the ground, or more, may be an object, m.
+    pub min_height_m: f64,
+    /// Neighbouring returns are one object when the angle between the
+    /// line joining them and the farther one's ray is at least this
+    /// (Bogoslavskyi & Stachniss 2016), degrees.
+    pub join_angle_deg: f64,
+    /// ... and when they are at most this far apart, m.
+    pub max_gap_m: f64,
+    /// Fewest cells of an object.
+    pub min_cells: usize,
+    /// Returns beyond this range are not segmented, m.
+    pub max_range_m: f64,
+}
+
+impl Default for ObjectConfig {
+    fn default() -> Self {
+        Self {
+            min_height_m: 0.25,
+            join_angle_deg: 10.0,
+            max_gap_m: 1.0,
+            min_cells: 6,
+            max_range_m: 80.0,
+        }
+    }
+}
+
+/// One object of a pair, in the LiDAR frame of its current scan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Object {
+    /// Stable over the pairs it is followed in (from 1; 0 before tracking).
+    pub id: u32,
+    /// Pairs this object has been followed in, this one included.
+    pub age_pairs: u32,
+    pub cells: usize,
+    /// Points of the scan that are its cells' surfaces.
+    pub points: usize,
+    /// 10th percentile of its cells' ranges, m.
+    pub nearest_range_m: f64,
+    /// Mean of its returns, m.
+    pub centroid_m: [f64; 3],
+    /// Axis-aligned extent of its returns, m.
+    pub min_m: [f64; 3],
+    pub max_m: [f64; 3],
+    /// Azimuth of the centroid (0 ahead, left positive), degrees.
+    pub bearing_deg: f64,
+    /// Its looming, 1/s, and standard error; `None` without a measured cell.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub looming_per_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub looming_se_per_s: Option<f64>,
+    /// Cells the looming was measured on.
+    pub measured_cells: usize,
+    /// `1 / looming` when approaching, s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_to_contact_s: Option<f64>,
+    /// Its `D` (looming of its own motion), 1/s; `None` without ego motion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disagreement_per_s: Option<f64>,
+    /// `|D|` significant: the object moves on its own.
+    pub moving: bool,
+}
+
+/// The objects of one pair.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PairObjects {
+    /// Per range-image cell, the index of its object in `objects`
+    /// ([`NO_OBJECT`]: ground, empty or too small a group).
+    pub cell_object: Vec<u32>,
+    pub objects: Vec<Object>,
+}
+
+impl PairObjects {
+    /// Find and measure the objects of a pair (ids not yet given: see
+    /// [`ObjectTracker::update`]).
+    pub fn find(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Self {
+        let cell_object = segment(scan, looming, config);
+        let objects = measure_objects(scan, looming, &cell_object);
+        Self {
+            cell_object,
+            objects,
+        }
+    }
+
+    /// The id of the object point `index` of the scan is the surface of.
+    pub fn object_of_point(&self, looming: &PairLooming, index: usize) -> Option<u32> {
+        let cell = looming.image.surface_cell(index)?;
+        let object = *self.cell_object.get(cell)?;
+        self.objects.get(object as usize).map(|o| o.id)
+    }
+}

@@ -1,0 +1,119 @@
+//! Range-image segmentation of the non-ground returns (Bogoslavskyi &
+//! Stachniss, "Fast range image-based segmentation of sparse 3D laser
+//! scans", 2016): two neighbouring returns at ranges `d1 >= d2`, their rays
+//! `alpha` apart, are one object when the angle
+//! `beta = atan2(d2 sin alpha, d1 - d2 cos alpha)` between the line joining
+//! them and the farther ray is large: a steep step in range (a car in front
+//! of a wall) makes `beta` small. One breadth-first pass over the cells.
+
+use std::collections::VecDeque;
+
+use super::ground::{GroundFit, cell_point};
+use super::{NO_OBJECT, ObjectConfig};
+use crate::engine::PairLooming;
+use crate::model::Scan;
+
+/// Per cell, the index of its object (in order of discovery), or
+/// [`NO_OBJECT`].
+pub fn segment(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Vec<u32> {
+    let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
+    let points = object_candidates(scan, looming, config);
+    let mut label = vec![NO_OBJECT; rows * cols];
+    let min_sin_beta = config.join_angle_deg.to_radians().sin();
+    let mut queue = VecDeque::new();
+    let mut members = Vec::new();
+    let mut next = 0u32;
+    for seed in 0..rows * cols {
+        if points[seed].is_none() || label[seed] != NO_OBJECT {
+            continue;
+        }
+        label[seed] = next;
+        members.clear();
+        queue.push_back(seed);
+        while let Some(cell) = queue.pop_front() {
+            members.push(cell);
+            let here = points[cell].expect("queued cells have a point");
+            for neighbour in neighbours(cell, rows, cols) {
+                let Some(there) = points[neighbour] else {
+                    continue;
+                };
+                if label[neighbour] == NO_OBJECT && joined(&here, &there, min_sin_beta, config) {
+                    label[neighbour] = next;
+                    queue.push_back(neighbour);
+                }
+            }
+        }
+        if members.len() >= config.min_cells {
+            next += 1;
+        } else {
+            // Too small: noise, a speck; its cells stay free for no one.
+            for &cell in &members {
+                label[cell] = NO_OBJECT - 1;
+            }
+        }
+    }
+    for l in &mut label {
+        if *l == NO_OBJECT - 1 {
+            *l = NO_OBJECT;
+        }
+    }
+    label
+}
+
+/// The returns that may belong to an object: above the ground, in range.
+fn object_candidates(
+    scan: &Scan,
+    looming: &PairLooming,
+    config: &ObjectConfig,
+) -> Vec<Option<[f64; 3]>> {
+    let ground = GroundFit::find(looming, scan);
+    (0..looming.mask.len())
+        .map(|cell| {
+            let p = cell_point(looming, scan, cell)?;
+            let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let height = ground
+                .as_ref()
+                .map_or(f64::INFINITY, |g| g.height_above(&p));
+            (range <= config.max_range_m && height >= config.min_height_m).then_some(p)
+        })
+        .collect()
+}
+
+/// The four neighbours of a cell, and the cells two columns away (a
+/// one-cell dropout does not split an object); columns wrap.
+fn neighbours(cell: usize, rows: usize, cols: usize) -> impl Iterator<Item = usize> {
+    let (row, col) = (cell / cols, cell % cols);
+    let left = |k: usize| row * cols + (col + cols - k % cols) % cols;
+    let right = |k: usize| row * cols + (col + k) % cols;
+    let up = (row + 1 < rows).then(|| cell + cols);
+    let down = (row > 0).then(|| cell - cols);
+    [
+        Some(left(1)),
+        Some(right(1)),
+        Some(left(2)),
+        Some(right(2)),
+        up,
+        down,
+    ]
+    .into_iter()
+    .flatten()
+    .filter(move |&n| n != cell)
+}
+
+/// Whether two neighbouring returns are on one object.
+fn joined(a: &[f64; 3], b: &[f64; 3], min_sin_beta: f64, config: &ObjectConfig) -> bool {
+    let gap = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+    if gap > config.max_gap_m {
+        return false;
+    }
+    let ra = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let rb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+    let (d1, d2) = if ra >= rb { (ra, rb) } else { (rb, ra) };
+    let cos_alpha = ((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (ra * rb)).clamp(-1.0, 1.0);
+    let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
+    // sin(beta) of the triangle: the line a-b against the farther ray.
+    let along = d1 - d2 * cos_alpha;
+    let across = d2 * sin_alpha;
+    let hypot = along.hypot(across);
+    hypot <= 1e-9 || across / hypot >= min_sin_beta
+}

@@ -1,0 +1,86 @@
+//! The objects of a log, as issue #24 judges them: of the objects with at
+//! least 50 points within 25 m, the share with a looming (per pair and per
+//! track), the median |D| of those not flagged moving, how long tracks last,
+//! and the time objects take. A development tool:
+//! `cargo run --release --example objects_probe -- LOG.mcap`.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use looming::engine::{self, EngineCache, EngineConfig};
+use looming::objects::{ObjectConfig, ObjectTracker, PairObjects};
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn main() {
+    let path = std::env::args().nth(1).expect("LOG.mcap");
+    let config = EngineConfig::default();
+    let object_config = ObjectConfig::default();
+    let mut cache = EngineCache::default();
+    let mut tracker = ObjectTracker::default();
+    let (mut pairs, mut seen, mut with_looming) = (0usize, 0usize, 0usize);
+    let mut static_abs_d = Vec::new();
+    let mut per_track: BTreeMap<u32, (usize, usize)> = BTreeMap::new();
+    let (mut objects_total, mut ms) = (0usize, 0.0f64);
+    looming::pipeline::replay(
+        std::path::Path::new(&path),
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
+                return;
+            };
+            let started = Instant::now();
+            let mut objects = PairObjects::find(&pair.current, &result, &object_config);
+            tracker.update(&mut objects, &result, pair.dt_s);
+            ms += started.elapsed().as_secs_f64() * 1e3;
+            pairs += 1;
+            objects_total += objects.objects.len();
+            for object in &objects.objects {
+                if object.points < 50 || object.nearest_range_m > 25.0 {
+                    continue;
+                }
+                seen += 1;
+                let measured = object.looming_per_s.is_some();
+                with_looming += usize::from(measured);
+                let entry = per_track.entry(object.id).or_default();
+                entry.0 += 1;
+                entry.1 += usize::from(measured);
+                if let (Some(d), false) = (object.disagreement_per_s, object.moving) {
+                    static_abs_d.push(d.abs());
+                }
+            }
+        },
+    )
+    .expect("a readable log");
+    let tracks_ok = per_track
+        .values()
+        .filter(|(n, m)| *m as f64 >= 0.9 * *n as f64)
+        .count();
+    let mut lengths: Vec<f64> = per_track.values().map(|(n, _)| *n as f64).collect();
+    println!("{path}");
+    println!(
+        "pairs {pairs}, objects {objects_total} ({:.1} per pair), objects time {:.2} ms per pair",
+        objects_total as f64 / pairs.max(1) as f64,
+        ms / pairs.max(1) as f64
+    );
+    println!(
+        "objects >= 50 points within 25 m: {seen} sightings, {:.1} % with a looming; {} tracks, {tracks_ok} ({:.0} %) with a looming in >= 90 % of their pairs; median track {} pairs",
+        100.0 * with_looming as f64 / seen.max(1) as f64,
+        per_track.len(),
+        100.0 * tracks_ok as f64 / per_track.len().max(1) as f64,
+        median(&mut lengths)
+    );
+    if static_abs_d.is_empty() {
+        println!("no D (no ego motion)");
+    } else {
+        println!(
+            "objects not flagged moving: median |D| {:.4} 1/s over {} sightings",
+            median(&mut static_abs_d.clone()),
+            static_abs_d.len()
+        );
+    }
+}
