@@ -342,6 +342,16 @@ impl PairQuality {
     /// The figures of one pair: `looming` as the engine computed it for the
     /// pair whose current scan is `current`.
     pub fn measure(looming: &PairLooming, current: &Scan) -> Self {
+        Self::measure_on_ground(looming, current, GroundFit::find(looming, current).as_ref())
+    }
+
+    /// [`Self::measure`] with the pair's ground already found (the objects
+    /// stage finds it too).
+    pub fn measure_on_ground(
+        looming: &PairLooming,
+        current: &Scan,
+        ground: Option<&GroundFit>,
+    ) -> Self {
         let cells = looming.mask.len();
         let points = current.points_m.len() as u64;
         let trusted_points = (0..current.points_m.len())
@@ -397,7 +407,7 @@ impl PairQuality {
             trusted_cells: trusted,
             trusted_cell_fraction: ratio(trusted, occupied),
             masked_cells: masked,
-            ground: measure_ground(looming, current),
+            ground: measure_ground(looming, ground),
             static_cells,
             median_abs_d_static_per_s,
             abs_d_static_histogram,
@@ -414,21 +424,22 @@ impl PairQuality {
     }
 }
 
-fn measure_ground(looming: &PairLooming, scan: &Scan) -> GroundQuality {
+fn measure_ground(looming: &PairLooming, fit: Option<&GroundFit>) -> GroundQuality {
     let Some(GroundFit {
         height_m: height,
         plane,
         cells: ground,
-    }) = GroundFit::find(looming, scan)
+    }) = fit
     else {
         return GroundQuality::default();
     };
+    let (height, plane) = (*height, *plane);
     let ego = looming.availability.ego_velocity;
     let mut abs_fused = Vec::new();
     let mut sides: [(Vec<f64>, Vec<f64>, u64); 2] = Default::default();
     let mut trusted_static = 0u64;
     let mut moving = 0u64;
-    for &(cell, p) in &ground {
+    for &(cell, p) in ground {
         if looming.mask[cell] != 0 {
             continue;
         }

@@ -210,7 +210,11 @@ impl Annotator {
         };
         let mut objects = PairObjects::find(&pair.current, &looming, &self.config.objects);
         self.tracker.update(&mut objects, &looming, pair.dt_s);
-        self.quality = Some(PairQuality::measure(&looming, &pair.current));
+        self.quality = Some(PairQuality::measure_on_ground(
+            &looming,
+            &pair.current,
+            objects.ground.as_ref(),
+        ));
         if let Some(quality) = &mut self.quality {
             quality.count_objects(&objects);
         }

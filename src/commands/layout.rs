@@ -65,7 +65,8 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
         lidar: lidar_topic.map(str::to_owned),
         ..TopicOverrides::default()
     };
-    let lidar = select(catalog, &overrides).ok().and_then(|s| s.lidar);
+    let selected = select(catalog, &overrides);
+    let lidar = selected.as_ref().ok().and_then(|s| s.lidar.clone());
     if let Some(pairs) = catalog.channels.values().find(|c| c.topic == PAIRS_TOPIC) {
         let frame = first_message(&input, pairs.id)?.and_then(|data| {
             let pair: Value = serde_json::from_slice(&data).ok()?;
@@ -79,7 +80,7 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
             });
         }
     }
-    let lidar = select(catalog, &overrides)
+    let lidar = selected
         .map_err(|source| LayoutError::Topic {
             path: log.to_path_buf(),
             source,

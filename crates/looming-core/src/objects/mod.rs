@@ -96,6 +96,9 @@ pub struct Object {
 /// The objects of one pair.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PairObjects {
+    /// The ground the objects stand on (also what `looming::quality` judges
+    /// the ego motion by: found once per pair).
+    pub ground: Option<ground::GroundFit>,
     /// Per range-image cell, the index of its object in `objects`
     /// ([`NO_OBJECT`]: ground, empty or too small a group).
     pub cell_object: Vec<u32>,
@@ -106,9 +109,11 @@ impl PairObjects {
     /// Find and measure the objects of a pair (ids not yet given: see
     /// [`ObjectTracker::update`]).
     pub fn find(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Self {
-        let cell_object = segment(scan, looming, config);
+        let ground = ground::GroundFit::find(looming, scan);
+        let cell_object = segment(scan, looming, ground.as_ref(), config);
         let objects = measure_objects(scan, looming, &cell_object);
         Self {
+            ground,
             cell_object,
             objects,
         }

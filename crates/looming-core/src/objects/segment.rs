@@ -15,9 +15,14 @@ use crate::model::Scan;
 
 /// Per cell, the index of its object (in order of discovery), or
 /// [`NO_OBJECT`].
-pub fn segment(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Vec<u32> {
+pub fn segment(
+    scan: &Scan,
+    looming: &PairLooming,
+    ground: Option<&GroundFit>,
+    config: &ObjectConfig,
+) -> Vec<u32> {
     let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
-    let points = object_candidates(scan, looming, config);
+    let points = object_candidates(scan, looming, ground, config);
     let mut label = vec![NO_OBJECT; rows * cols];
     let min_sin_beta = config.join_angle_deg.to_radians().sin();
     let mut queue = VecDeque::new();
@@ -64,9 +69,9 @@ pub fn segment(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Vec
 fn object_candidates(
     scan: &Scan,
     looming: &PairLooming,
+    ground: Option<&GroundFit>,
     config: &ObjectConfig,
 ) -> Vec<Option<[f64; 3]>> {
-    let ground = GroundFit::find(looming, scan);
     (0..looming.mask.len())
         .map(|cell| {
             let p = cell_point(looming, scan, cell)?;
