@@ -57,19 +57,17 @@ pub fn measure_objects(scan: &Scan, looming: &PairLooming, cell_object: &[u32]) 
     cells
         .iter()
         .zip(points)
-        .map(|(cells, points)| Object {
-            points,
-            ..measure(scan, looming, cells)
-        })
+        .map(|(cells, points)| measure(scan, looming, cells, points))
         .collect()
 }
 
-fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize]) -> Object {
-    let points: Vec<[f64; 3]> = cells
+/// One object of `cells`, `points` of the scan being their surfaces.
+fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -> Object {
+    let returns: Vec<[f64; 3]> = cells
         .iter()
         .filter_map(|&c| cell_point(looming, scan, c))
         .collect();
-    let mut ranges: Vec<f64> = points
+    let mut ranges: Vec<f64> = returns
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
         .collect();
@@ -78,11 +76,11 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize]) -> Object {
         .get((ranges.len().saturating_sub(1)) / 10)
         .copied()
         .unwrap_or(f64::NAN);
-    let n = points.len().max(1) as f64;
+    let n = returns.len().max(1) as f64;
     let mut centroid_m = [0.0; 3];
     let mut min_m = [f64::INFINITY; 3];
     let mut max_m = [f64::NEG_INFINITY; 3];
-    for p in &points {
+    for p in &returns {
         for k in 0..3 {
             centroid_m[k] += p[k] / n;
             min_m[k] = min_m[k].min(p[k]);
@@ -117,7 +115,7 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize]) -> Object {
         id: 0,
         age_pairs: 0,
         cells: cells.len(),
-        points: 0,
+        points,
         nearest_range_m,
         centroid_m,
         min_m,

@@ -24,42 +24,44 @@ pub fn segment(
     let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
     let points = object_candidates(scan, looming, ground, config);
     let mut label = vec![NO_OBJECT; rows * cols];
+    // Visited by a search (an object's, or a group too small to be one).
+    let mut visited = vec![false; rows * cols];
     let min_sin_beta = config.join_angle_deg.to_radians().sin();
     let mut queue = VecDeque::new();
     let mut members = Vec::new();
     let mut next = 0u32;
     for seed in 0..rows * cols {
-        if points[seed].is_none() || label[seed] != NO_OBJECT {
+        if points[seed].is_none() || visited[seed] {
             continue;
         }
-        label[seed] = next;
+        visited[seed] = true;
         members.clear();
         queue.push_back(seed);
         while let Some(cell) = queue.pop_front() {
             members.push(cell);
             let here = points[cell].expect("queued cells have a point");
-            for neighbour in neighbours(cell, rows, cols) {
+            for (neighbour, between) in neighbours(cell, rows, cols) {
                 let Some(there) = points[neighbour] else {
                     continue;
                 };
-                if label[neighbour] == NO_OBJECT && joined(&here, &there, min_sin_beta, config) {
-                    label[neighbour] = next;
+                // Two columns away only across a dropout, never across
+                // another return (a pole before a wall).
+                let across_a_return = between.is_some_and(|b| points[b].is_some());
+                if !visited[neighbour]
+                    && !across_a_return
+                    && joined(&here, &there, min_sin_beta, config)
+                {
+                    visited[neighbour] = true;
                     queue.push_back(neighbour);
                 }
             }
         }
+        // A group too small (noise, a speck) is no object.
         if members.len() >= config.min_cells {
-            next += 1;
-        } else {
-            // Too small: noise, a speck; its cells stay free for no one.
             for &cell in &members {
-                label[cell] = NO_OBJECT - 1;
+                label[cell] = next;
             }
-        }
-    }
-    for l in &mut label {
-        if *l == NO_OBJECT - 1 {
-            *l = NO_OBJECT;
+            next += 1;
         }
     }
     label
@@ -85,24 +87,29 @@ fn object_candidates(
 }
 
 /// The four neighbours of a cell, and the cells two columns away (a
-/// one-cell dropout does not split an object); columns wrap.
-fn neighbours(cell: usize, rows: usize, cols: usize) -> impl Iterator<Item = usize> {
+/// one-cell dropout does not split an object) with the cell between; columns
+/// wrap.
+fn neighbours(
+    cell: usize,
+    rows: usize,
+    cols: usize,
+) -> impl Iterator<Item = (usize, Option<usize>)> {
     let (row, col) = (cell / cols, cell % cols);
     let left = |k: usize| row * cols + (col + cols - k % cols) % cols;
     let right = |k: usize| row * cols + (col + k) % cols;
-    let up = (row + 1 < rows).then(|| cell + cols);
-    let down = (row > 0).then(|| cell - cols);
+    let up = (row + 1 < rows).then(|| (cell + cols, None));
+    let down = (row > 0).then(|| (cell - cols, None));
     [
-        Some(left(1)),
-        Some(right(1)),
-        Some(left(2)),
-        Some(right(2)),
+        Some((left(1), None)),
+        Some((right(1), None)),
+        Some((left(2), Some(left(1)))),
+        Some((right(2), Some(right(1)))),
         up,
         down,
     ]
     .into_iter()
     .flatten()
-    .filter(move |&n| n != cell)
+    .filter(move |&(n, _)| n != cell)
 }
 
 /// Whether two neighbouring returns are on one object.

@@ -107,19 +107,14 @@ impl ObjectTracker {
         dt_s: f64,
     ) -> Track {
         let track = &self.tracks[t];
-        // Where the track would be had it stood still, against where the
-        // object is: its own displacement, smoothed.
-        let still = static_prediction(
-            &track.centroid_m,
-            ego_v,
-            ego_w,
-            dt_s * f64::from(track.missed + 1),
-        );
-        let elapsed = dt_s * f64::from(track.missed + 1);
+        // Where the track would be had it stood still over this pair (a
+        // track kept through missed pairs was moved along each of them),
+        // against where the object is: its own displacement, smoothed.
+        let still = static_prediction(&track.centroid_m, ego_v, ego_w, dt_s);
         let mut velocity_mps = track.velocity_mps;
-        if elapsed > 0.0 {
+        if dt_s > 0.0 {
             for k in 0..3 {
-                let measured = (object.centroid_m[k] - still[k]) / elapsed;
+                let measured = (object.centroid_m[k] - still[k]) / dt_s;
                 velocity_mps[k] = 0.5 * velocity_mps[k] + 0.5 * measured;
             }
         }
