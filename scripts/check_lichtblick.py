@@ -75,9 +75,8 @@ for path in files:
     expected = sorted({c["topic"] for c in inspect["channels"] if c.get("message_count", 0) > 0})
     layout = os.path.join(shots, f"{name}.layout.json")
     run(looming, "layout", path, "-o", layout, "--force")
-    events = json.loads(run(looming, "events", path, "--json") or "[]")
-    if isinstance(events, dict):
-        events = events.get("events", [])
+    # Ranked by time to contact: the first is the worst near miss.
+    events = json.loads(run(looming, "events", path, "--json"))
     site = os.path.join(shots, f"{name}.site")
     run(sys.executable, os.path.join(kit, "make_site.py"), web, site, layout, path)
     port = free_port()
