@@ -20,7 +20,11 @@ fn main() {
     let max_pairs: usize = args
         .get(2)
         .map_or(usize::MAX, |a| a.parse().expect("a count"));
-    let config = EngineConfig::default();
+    // DIAG_NO_BIAS: without the per-laser range offsets, to see what they do.
+    let config = EngineConfig {
+        correct_range_bias: std::env::var_os("DIAG_NO_BIAS").is_none(),
+        ..EngineConfig::default()
+    };
     let mut cache = EngineCache::default();
     let mut totals = Totals::default();
     let mut done = 0;
@@ -100,6 +104,9 @@ impl Totals {
         }
         if std::env::var("DIAG_ROWS").is_ok() {
             print_mask_shares_per_row(r);
+        }
+        if std::env::var("DIAG_FACING").is_ok() {
+            print_facing_sectors(scan, r);
         }
         if let Some(e) = &r.ego_estimate {
             print_ego_estimate(e);
@@ -370,7 +377,7 @@ fn print_mask_shares_per_row(r: &engine::PairLooming) {
 /// The engine's own motion estimate for the pair.
 fn print_ego_estimate(e: &engine::egomotion::EgoEstimate) {
     println!(
-        "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m",
+        "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m  sd v {:.3} {:.3} {:.3} m/s w {:.4} {:.4} {:.4} rad/s",
         e.velocity_mps[0],
         e.velocity_mps[1],
         e.velocity_mps[2],
@@ -378,7 +385,13 @@ fn print_ego_estimate(e: &engine::egomotion::EgoEstimate) {
         e.angular_velocity_radps[1],
         e.angular_velocity_radps[2],
         e.inlier_cells,
-        e.residual_m
+        e.residual_m,
+        e.covariance[3][3].sqrt(),
+        e.covariance[4][4].sqrt(),
+        e.covariance[5][5].sqrt(),
+        e.covariance[0][0].sqrt(),
+        e.covariance[1][1].sqrt(),
+        e.covariance[2][2].sqrt(),
     );
 }
 
@@ -658,4 +671,59 @@ fn value_png(values: &[f32], r: &engine::PairLooming, path: &str) {
 fn sector_of(azimuth: f32, sectors: usize) -> usize {
     let t = (azimuth + std::f32::consts::PI) / std::f32::consts::TAU;
     ((t * sectors as f32) as usize).min(sectors - 1)
+}
+
+/// DIAG_FACING: trusted cells whose surface faces along x (|n_x| > 0.7), by
+/// side (ahead / behind) and range band: their count and median `L_lidar`
+/// and `L_ray_ego`, to see which surfaces pin down forward motion.
+fn print_facing_sectors(scan: &Scan, r: &engine::PairLooming) {
+    let mut bands: std::collections::BTreeMap<(bool, u32), (Vec<f32>, Vec<f32>)> =
+        std::collections::BTreeMap::new();
+    for cell in 0..r.mask.len() {
+        let n = r.normal[cell];
+        if r.mask[cell] != 0 || n[0].abs() < 0.7 || !r.l_lidar[cell].is_finite() {
+            continue;
+        }
+        let index = r.image.point[cell];
+        if index == engine::NO_POINT {
+            continue;
+        }
+        let p = scan.points_m[index as usize];
+        let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        let band = (range / 5.0) as u32 * 5;
+        if std::env::var("DIAG_FACING_POINTS").is_ok() && p[0] < 0.0 && range < 5.0 && cell % 7 == 0
+        {
+            println!(
+                "    behind cell {cell} row {} col {} p {:+.2} {:+.2} {:+.2} n {:+.2} {:+.2} {:+.2} L_lidar {:+.3} dt {:.3}",
+                cell / r.geometry.cols,
+                cell % r.geometry.cols,
+                p[0],
+                p[1],
+                p[2],
+                n[0],
+                n[1],
+                n[2],
+                r.l_lidar[cell],
+                r.dt_s[cell]
+            );
+        }
+        let entry = bands.entry((p[0] > 0.0, band)).or_default();
+        entry.0.push(r.l_lidar[cell]);
+        entry.1.push(r.l_ray_ego[cell]);
+    }
+    for ((ahead, band), (mut lidar, mut ego)) in bands {
+        if lidar.len() < 30 {
+            continue;
+        }
+        lidar.sort_by(f32::total_cmp);
+        ego.sort_by(f32::total_cmp);
+        println!(
+            "  facing x {} {band:>2}-{:>2} m: {:5} cells, L_lidar {:+.3}, L_ray_ego {:+.3}",
+            if ahead { "ahead " } else { "behind" },
+            band + 5,
+            lidar.len(),
+            lidar[lidar.len() / 2],
+            ego[ego.len() / 2]
+        );
+    }
 }

@@ -77,10 +77,13 @@ fn main() {
     }
     let engine = EngineConfig::default();
     let config = EventConfig::default();
+    // The clusters printed are sought a metre wider than the events.
     let wide = EventConfig {
-        corridor_half_width_m: 2.5,
+        path_margin_m: config.path_margin_m + 1.0,
         ..config.clone()
     };
+    let mut tracker = looming::objects::ObjectTracker::default();
+    let object_config = looming::objects::ObjectConfig::default();
     let mut cache = EngineCache::default();
     let mut detector = EventDetector::new(config.clone());
     let mut events = Vec::new();
@@ -89,20 +92,34 @@ fn main() {
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            let Some(looming) = compute_with_cache(&pair, &engine, &mut cache) else {
+            let Some(mut looming) = compute_with_cache(&pair, &engine, &mut cache) else {
                 return;
             };
+            // As `process` does: the objects, tracked, fed back into the cells.
+            let (objects, _) = looming::objects::PairObjects::find_tracked_fused(
+                &pair.current,
+                &mut looming,
+                (&object_config, &engine.threat_ttc_s),
+                &mut tracker,
+                pair.dt_s,
+            );
             let t_s = drive_time_s(pair.current.stamp_ns);
             let stamp = pair.current.stamp_ns;
             let corridor = Corridor::new(
                 pair.motion.velocity_at(stamp),
                 pair.motion.angular_velocity_at(stamp),
-                wide.corridor_half_width_m,
+                wide.corridor_half_width_m(),
             );
-            let clusters: Vec<String> = hot_clusters(&looming, &pair.current, &corridor, &wide, 2)
-                .iter()
-                .map(describe_cluster)
-                .collect();
+            let clusters: Vec<String> = hot_clusters(
+                &looming,
+                (&pair.current, Some(&objects)),
+                &corridor,
+                &wide,
+                2,
+            )
+            .iter()
+            .map(describe_cluster)
+            .collect();
             if !clusters.is_empty() {
                 let min_cells = default_min_cells(&looming.geometry);
                 println!("{t_s:5.2} (min {min_cells}) {}", clusters.join(" "));
@@ -110,6 +127,7 @@ fn main() {
             events.extend(detector.observe(&PairFrame {
                 pair: &pair,
                 looming: &looming,
+                objects: Some(&objects),
             }));
         },
     )

@@ -32,6 +32,8 @@ struct Face {
     fused: Vec<f32>,
     lidar: Vec<f32>,
     objects: Vec<Option<u32>>,
+    /// Per face point: its cell's mask bits (`EMPTY` without a cell).
+    masks: Vec<u8>,
     /// Looming of each object id seen on the face.
     object_looming: std::collections::BTreeMap<u32, Option<f64>>,
 }
@@ -74,6 +76,9 @@ fn face_of(
             .filter(|&c| !trusted_only || result.mask[c] == 0)
             .map_or(f32::NAN, |c| values[c])
     };
+    if std::env::var_os("FACE_WHY").is_some() {
+        print_untrusted_causes(result, objects, &face);
+    }
     Some(Face {
         stamp_ns: scan.stamp_ns,
         distance_m,
@@ -85,6 +90,15 @@ fn face_of(
         lidar: face
             .iter()
             .map(|&i| value(&result.l_lidar, i, false))
+            .collect(),
+        masks: face
+            .iter()
+            .map(|&i| {
+                result
+                    .image
+                    .surface_cell(i)
+                    .map_or(engine::mask::EMPTY, |c| result.mask[c])
+            })
             .collect(),
         objects: face
             .iter()
@@ -117,11 +131,16 @@ fn main() {
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
+            let Some(mut result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
                 return;
             };
-            let mut objects = PairObjects::find(&pair.current, &result, &object_config);
-            tracker.update(&mut objects, &result, pair.dt_s);
+            let (objects, _) = PairObjects::find_tracked_fused(
+                &pair.current,
+                &mut result,
+                (&object_config, &config.threat_ttc_s),
+                &mut tracker,
+                pair.dt_s,
+            );
             if let Some(face) = face_of(&pair.current, &result, &objects, &b) {
                 faces.push(face);
             }
@@ -129,6 +148,30 @@ fn main() {
     )
     .expect("a readable log");
     report(&faces);
+    mask_breakdown(&faces);
+}
+
+/// The share of face points carrying each mask bit (a point may carry several).
+fn mask_breakdown(faces: &[Face]) {
+    let names = [
+        "EMPTY",
+        "NO_PREVIOUS",
+        "EDGE",
+        "GRAZING",
+        "NO_EGO",
+        "OCCLUSION",
+    ];
+    let masks: Vec<u8> = faces.iter().flat_map(|f| f.masks.iter().copied()).collect();
+    let total = masks.len().max(1) as f64;
+    let shares: Vec<String> = names
+        .iter()
+        .enumerate()
+        .map(|(bit, name)| {
+            let n = masks.iter().filter(|&&m| m & (1 << bit) != 0).count();
+            format!("{name} {:.1} %", 100.0 * n as f64 / total)
+        })
+        .collect();
+    println!("face points' mask bits: {}", shares.join(", "));
 }
 
 fn report(faces: &[Face]) {
@@ -266,4 +309,40 @@ fn dominant_object(objects: &[Option<u32>]) -> Option<(u32, f64)> {
         .into_iter()
         .max_by_key(|&(_, n)| n)
         .map(|(id, n)| (id, n as f64 / objects.len().max(1) as f64))
+}
+
+/// FACE_WHY: why the face's untrusted points are untrusted: no object, an
+/// own value inconsistent with the object's, or no value of its own (with
+/// its normal's x component: the rear face's normal is about -x).
+fn print_untrusted_causes(result: &engine::PairLooming, objects: &PairObjects, face: &[usize]) {
+    let mut causes: std::collections::BTreeMap<String, usize> = std::collections::BTreeMap::new();
+    for &i in face {
+        let Some(cell) = result.image.surface_cell(i) else {
+            *causes.entry("no cell".into()).or_default() += 1;
+            continue;
+        };
+        if result.mask[cell] == 0 {
+            continue;
+        }
+        let cause = if objects.cell_object[cell] == looming::objects::NO_OBJECT {
+            "no object".to_string()
+        } else if result.fused[cell].is_finite()
+            && result.mask[cell] & (engine::mask::NO_PREVIOUS | engine::mask::OCCLUSION) == 0
+        {
+            format!("own value, mask {}", result.mask[cell])
+        } else {
+            let nx = result.normal[cell][0];
+            format!(
+                "no own value, mask {}, n_x {}",
+                result.mask[cell],
+                if nx == 0.0 {
+                    "unknown".to_string()
+                } else {
+                    format!("{:.1}", (nx * 5.0).round() / 5.0)
+                }
+            )
+        };
+        *causes.entry(cause).or_default() += 1;
+    }
+    println!("untrusted of {} face points: {causes:?}", face.len());
 }

@@ -30,12 +30,17 @@ fn main() {
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            let Some(result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
+            let Some(mut result) = engine::compute_with_cache(&pair, &config, &mut cache) else {
                 return;
             };
             let started = Instant::now();
-            let mut objects = PairObjects::find(&pair.current, &result, &object_config);
-            tracker.update(&mut objects, &result, pair.dt_s);
+            let (objects, _) = PairObjects::find_tracked_fused(
+                &pair.current,
+                &mut result,
+                (&object_config, &config.threat_ttc_s),
+                &mut tracker,
+                pair.dt_s,
+            );
             ms += started.elapsed().as_secs_f64() * 1e3;
             pairs += 1;
             objects_total += objects.objects.len();

@@ -596,6 +596,8 @@ mod tests {
                 l_ray_ego: nan.clone(),
                 disagreement: self.d,
                 sigma_per_s: nan.clone(),
+                fused_sigma_per_s: nan.clone(),
+                ray_ego_sigma_per_s: nan.clone(),
                 confidence: nan.clone(),
                 mask: self.masks,
                 disagrees: vec![false; cells],

@@ -131,16 +131,29 @@ fn close_to_input(written: [f32; 3], input: [f32; 3]) -> bool {
     (0..3).all(|k| (written[k] - input[k]).abs() <= POSITION_QUANTUM_M / 2.0 + 1e-6)
 }
 
-/// The engine's results for every pair of `input`, by current log time.
+/// The engine's results for every pair of `input`, by current log time,
+/// with the objects' looming fed back into their cells as `process` does.
 fn engine_results(input: &Path) -> BTreeMap<u64, (ScanPair, PairLooming)> {
     let mut cache = EngineCache::default();
     let mut results = BTreeMap::new();
+    let config = EngineConfig::default();
+    let mut tracker = looming::objects::ObjectTracker::default();
     looming::pipeline::replay(
         input,
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            if let Some(result) = compute_with_cache(&pair, &EngineConfig::default(), &mut cache) {
+            if let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) {
+                looming::objects::PairObjects::find_tracked_fused(
+                    &pair.current,
+                    &mut result,
+                    (
+                        &looming::objects::ObjectConfig::default(),
+                        &config.threat_ttc_s,
+                    ),
+                    &mut tracker,
+                    pair.dt_s,
+                );
                 results.insert(pair.current_log_time_ns, (pair, result));
             }
         },
@@ -551,6 +564,9 @@ fn near_misses_are_reported_where_planted_and_nowhere_else() {
                 "{scenario}: found {summary:?}, planted {truth:?}"
             );
             assert!(event.min_time_to_contact_s < 1.5);
+            // Each near miss names its object, in the swept path.
+            assert!(event.object_id.is_some(), "{scenario}: {event:?}");
+            assert!(event.peak.lateral_offset_m <= 1.45, "{scenario}: {event:?}");
         }
         match scenario {
             "cut-in" => {
@@ -668,5 +684,50 @@ fn on_a_lidar_only_log_the_near_miss_is_judged_with_the_estimated_motion() {
     let speed = event.peak.ego_speed_mps.expect("the estimated speed");
     assert!((3.0..=12.5).contains(&speed), "{speed}");
     assert!(event.min_time_to_contact_s < 1.5, "{event:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_object_beside_the_swept_path_is_never_a_near_miss() {
+    // safe-drive's oncoming cars pass 2.5 m from the LiDAR's path, looming
+    // 5 1/s: outside the default swept path (1.9 m vehicle, 0.5 m margin
+    // either side: 1.45 m), no near miss; a path widened to 2.95 m takes them
+    // in, which shows the gate, not the looming, keeps them out.
+    let dir = scratch("annotate-swept-path");
+    let input = synth(&dir, "safe-drive", &[]);
+    let default = process_events(&input, &dir.join("default.mcap"), &dir.join("default.json"));
+    assert!(default.events.is_empty(), "{:?}", default.events);
+    assert_eq!(default.config.vehicle_width_m, 1.9);
+    assert_eq!(default.config.path_margin_m, 0.5);
+    let wide_events = dir.join("wide.json");
+    process(
+        &input,
+        &dir.join("wide.mcap"),
+        &[
+            "--path-margin",
+            "2.0",
+            "--events",
+            wide_events.to_str().unwrap(),
+        ],
+    );
+    let wide: looming::events::EventsFile =
+        serde_json::from_slice(&std::fs::read(&wide_events).unwrap()).unwrap();
+    assert!(
+        !wide.events.is_empty(),
+        "the oncoming cars in a 2.95 m path"
+    );
+    for event in &wide.events {
+        let offset = event.peak.lateral_offset_m;
+        assert!((1.45..=2.95).contains(&offset), "{event:?}");
+        assert!(event.object_id.is_some(), "{event:?}");
+    }
+    // A width that is not a width is refused.
+    let refused = common::looming_process(&input, &dir.join("bad.mcap"), &["--vehicle-width", "0"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains("--vehicle-width"),
+        "{}",
+        stderr(&refused)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

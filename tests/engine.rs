@@ -128,8 +128,15 @@ fn moving_objects_are_found_and_their_looming_is_measured() {
         assert!(detection.true_positive > 100, "{name}: {detection:?}");
         assert!(detection.f1 >= 0.95, "{name}: moving F1 {detection:?}");
         let fused = stats(&report, "fused", "all_unmasked").rmse;
+        let engine_fused = stats(&report, "engine_fused", "all_unmasked").rmse;
         let l_lidar = stats(&report, "l_lidar", "all_unmasked").rmse;
         let ray_ego = stats(&report, "l_ray_ego", "all_unmasked").rmse;
+        // The engine's own fusion beats both of its inputs.
+        assert!(
+            engine_fused < l_lidar && engine_fused < ray_ego,
+            "{name}: engine fused {engine_fused} vs {l_lidar} / {ray_ego}"
+        );
+        // What users see, after the objects' feedback, too.
         assert!(
             fused < l_lidar && fused < ray_ego,
             "{name}: fused {fused} vs {l_lidar} / {ray_ego}"

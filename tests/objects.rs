@@ -25,6 +25,9 @@ fn the_cut_in_car_is_one_tracked_moving_object_with_the_near_miss_looming() {
         event["end_log_time_ns"].as_u64().unwrap(),
     );
     let peak_time = event["peak"]["log_time_ns"].as_u64().unwrap();
+    let event_object = event["object_id"]
+        .as_u64()
+        .expect("the near miss names its object");
     let peak_looming = event["peak"]["looming_per_s"].as_f64().unwrap();
     let lists = contents.topic_messages("/looming/object_list");
     assert_eq!(
@@ -71,5 +74,76 @@ fn the_cut_in_car_is_one_tracked_moving_object_with_the_near_miss_looming() {
         }
     }
     assert_eq!(ids.len(), 1, "one id through the near miss: {ids:?}");
+    assert!(ids.contains(&event_object), "{event_object} vs {ids:?}");
     common::viewer::assert_opens_in_viewers(&out);
+}
+
+/// The feedback of the objects' looming into their cells
+/// (`objects::fuse_objects`), on the committed cut-in: on the car, the cells
+/// trusted after it are most of the car and never fewer than before, and
+/// their fused looming is the car's.
+#[test]
+fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
+    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
+    use looming::objects::{ObjectConfig, PairObjects, fuse_objects};
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let config = EngineConfig::default();
+    let mut cache = EngineCache::default();
+    let mut checked = 0;
+    let (mut car_cells, mut trusted_before, mut trusted_after) = (0, 0, 0);
+    looming::pipeline::replay(
+        &input,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) else {
+                return;
+            };
+            let objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
+            // The car: the nearest approaching object within 15 degrees of ahead.
+            let Some((index, car)) = objects
+                .objects
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| o.bearing_deg.abs() < 15.0 && o.looming_per_s > Some(0.5))
+                .min_by(|a, b| a.1.nearest_range_m.total_cmp(&b.1.nearest_range_m))
+            else {
+                return;
+            };
+            let car_looming = car.looming_per_s.unwrap();
+            let cells: Vec<usize> = (0..objects.cell_object.len())
+                .filter(|&c| objects.cell_object[c] == index as u32)
+                .collect();
+            let trusted = |r: &looming::engine::PairLooming| {
+                cells.iter().filter(|&&c| r.mask[c] == 0).count()
+            };
+            let before = trusted(&result);
+            let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
+            let after = trusted(&result);
+            assert!(after >= before, "{after} < {before}");
+            assert!(counts.combined > 0, "{counts:?}");
+            car_cells += cells.len();
+            trusted_before += before;
+            trusted_after += after;
+            let mut errors: Vec<f64> = cells
+                .iter()
+                .filter(|&&c| result.mask[c] == 0)
+                .map(|&c| (f64::from(result.fused[c]) - car_looming).abs())
+                .collect();
+            errors.sort_by(f64::total_cmp);
+            let median = errors[errors.len() / 2];
+            assert!(median < 0.05, "median |fused - car| {median}");
+            checked += 1;
+        },
+    )
+    .unwrap();
+    assert!(checked >= 5, "{checked} pairs with the car ahead");
+    // Over the pairs: most of the car (its side, cutting in, is another face
+    // and keeps the engine's judgement: 77 % in all at 2026-11-25), a tenth
+    // more than the engine alone trusted (67 %).
+    assert!(
+        trusted_after as f64 >= 0.75 * car_cells as f64
+            && trusted_after as f64 >= 1.1 * trusted_before as f64,
+        "{trusted_before} -> {trusted_after} of {car_cells} car cells trusted"
+    );
 }

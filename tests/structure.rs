@@ -19,7 +19,6 @@ const LAYERS: &[(&str, u32)] = &[
     // The looming math.
     ("engine", 1),
     // Pure stages and readers of bytes into the model.
-    ("events", 2),
     ("objects", 2),
     ("pairing", 2),
     ("quality", 2),
@@ -27,6 +26,8 @@ const LAYERS: &[(&str, u32)] = &[
     ("decode", 2),
     ("input", 2),
     ("budget", 2),
+    // Near misses, judged on the objects in the swept path.
+    ("events", 3),
     // The `/truth/*` layout (a point cloud of the ROS messages), and MCAP
     // writing.
     ("truth", 3),
@@ -52,9 +53,8 @@ const SIBLING_USES: &[(&str, &str)] = &[
     // calls the readers.
     ("ros", "decode"),
     ("decode", "ros"),
-    // Per-pair quality figures are measured on the detector's events too,
-    // and on the ground the objects stand on.
-    ("quality", "events"),
+    // Per-pair quality figures are measured on the ground the objects stand
+    // on.
     ("quality", "objects"),
 ];
 

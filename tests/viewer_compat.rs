@@ -354,7 +354,13 @@ fn batch_links_a_clip_per_near_miss_and_writes_a_layout() {
     let first: serde_json::Value = serde_json::from_str(jsonl.lines().next().unwrap()).unwrap();
     assert_eq!(first["clip"], clip.to_str().unwrap());
     let csv = std::fs::read_to_string(out.join("near_misses.csv")).unwrap();
-    assert!(csv.lines().next().unwrap().ends_with(",clip"), "{csv}");
+    assert!(
+        csv.lines()
+            .next()
+            .unwrap()
+            .ends_with(",clip,object_id,lateral_offset_m"),
+        "{csv}"
+    );
     assert!(
         csv.contains("clips/day1/cut-in/cut-in.event-1.mcap"),
         "{csv}"

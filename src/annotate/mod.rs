@@ -138,6 +138,11 @@ pub struct AnnotateStats {
     /// Pairs whose velocity or angular rate no source measured, estimated
     /// from the static world by the engine (`engine::egomotion`).
     pub pairs_motion_estimated: u64,
+    /// Cells whose fused looming was combined with their object's
+    /// (`objects::fuse_objects`).
+    pub cells_fused_with_object: u64,
+    /// Cells without a value of their own that took their object's.
+    pub cells_filled_from_object: u64,
     pub points_written: u64,
     pub disagreement_points_written: u64,
     pub threat_points_written: u64,
@@ -204,12 +209,21 @@ impl Annotator {
         let looming = compute_with_cache(pair, &self.config.engine, &mut self.cache);
         self.stats.engine_s += started.elapsed().as_secs_f64();
         self.quality = None;
-        let Some(looming) = looming else {
+        let Some(mut looming) = looming else {
             self.stats.pairs_without_image += 1;
             return Vec::new();
         };
-        let mut objects = PairObjects::find(&pair.current, &looming, &self.config.objects);
-        self.tracker.update(&mut objects, &looming, pair.dt_s);
+        // The objects' looming fed back into their cells before anything is
+        // judged or drawn from the fused looming.
+        let (objects, fusion) = PairObjects::find_tracked_fused(
+            &pair.current,
+            &mut looming,
+            (&self.config.objects, &self.config.engine.threat_ttc_s),
+            &mut self.tracker,
+            pair.dt_s,
+        );
+        self.stats.cells_fused_with_object += fusion.combined as u64;
+        self.stats.cells_filled_from_object += fusion.filled as u64;
         self.quality = Some(PairQuality::measure_on_ground(
             &looming,
             &pair.current,
@@ -229,6 +243,7 @@ impl Annotator {
         let ended = self.detector.observe(&PairFrame {
             pair,
             looming: &looming,
+            objects: Some(&objects),
         });
         self.stats.event_min_cells = self.detector.min_cells_used();
         if let Some(quality) = &mut self.quality {

@@ -37,8 +37,17 @@ pub struct ObjectRecord {
 }
 
 /// The threat level of an object from its time to contact and the levels'
-/// times (`--threat-ttc`, longest first).
+/// times (`--threat-ttc`, longest first); none unless its approach is
+/// significant (looming above twice its standard error: a hedge's range
+/// jitter is no approach).
 pub fn object_threat(object: &Object, ttc_s: &[f64; 3]) -> ThreatLevel {
+    let significant = match (object.looming_per_s, object.looming_se_per_s) {
+        (Some(l), Some(se)) => l > 2.0 * se,
+        _ => false,
+    };
+    if !significant {
+        return ThreatLevel::None;
+    }
     match object.time_to_contact_s {
         Some(t) if t <= ttc_s[2] => ThreatLevel::High,
         Some(t) if t <= ttc_s[1] => ThreatLevel::Medium,

@@ -368,9 +368,14 @@ pub(crate) struct AnnotateArgs {
     /// Consecutive scan pairs a cluster must last to be a near miss.
     #[arg(long, value_name = "PAIRS", default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..))]
     pub(crate) event_min_pairs: u64,
-    /// Half width of the ego corridor in which near misses are sought, metres.
-    #[arg(long, value_name = "METRES", default_value_t = 2.0)]
-    pub(crate) corridor_half_width: f64,
+    /// Width of the vehicle, metres: near misses are sought in its swept
+    /// path (the arc of its speed and yaw rate), this wide plus the margin
+    /// either side; an object beside it is never a near miss.
+    #[arg(long, value_name = "METRES", default_value_t = 1.9)]
+    pub(crate) vehicle_width: f64,
+    /// Clearance added either side of the vehicle's swept path, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.5)]
+    pub(crate) path_margin: f64,
     /// A log with no LiDAR topic: `refuse` it (exit 2, listing its
     /// channels) or `copy` every record through with the run record and no
     /// looming channel.

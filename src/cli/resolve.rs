@@ -108,9 +108,14 @@ fn event_config(args: &AnnotateArgs) -> Result<EventConfig, Failure> {
             "--event-ttc must be a positive number of seconds".into(),
         ));
     }
-    if !(args.corridor_half_width.is_finite() && args.corridor_half_width > 0.0) {
+    if !(args.vehicle_width.is_finite() && args.vehicle_width > 0.0) {
         return Err(usage(
-            "--corridor-half-width must be a positive number of metres".into(),
+            "--vehicle-width must be a positive number of metres".into(),
+        ));
+    }
+    if !(args.path_margin.is_finite() && args.path_margin >= 0.0) {
+        return Err(usage(
+            "--path-margin must be zero or a positive number of metres".into(),
         ));
     }
     if args.event_min_cells == Some(0) {
@@ -120,7 +125,8 @@ fn event_config(args: &AnnotateArgs) -> Result<EventConfig, Failure> {
         ttc_threshold_s: args.event_ttc,
         min_cells: args.event_min_cells,
         min_pairs: args.event_min_pairs,
-        corridor_half_width_m: args.corridor_half_width,
+        vehicle_width_m: args.vehicle_width,
+        path_margin_m: args.path_margin,
         ..EventConfig::default()
     })
 }

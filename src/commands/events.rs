@@ -57,7 +57,7 @@ pub fn events_table(events: &[NearMissEvent]) -> String {
     }
     let _ = writeln!(
         out,
-        "{:>4}  {:>22}  {:>7}  {:>8}  {:>8}  {:>8}  {:>8}  {:>7}  {:>6}  {:>7}  {:>6}",
+        "{:>4}  {:>22}  {:>7}  {:>8}  {:>8}  {:>8}  {:>8}  {:>7}  {:>6}  {:>7}  {:>6}  {:>6}",
         "id",
         "start (log time)",
         "dur s",
@@ -68,12 +68,13 @@ pub fn events_table(events: &[NearMissEvent]) -> String {
         "lat m",
         "moving",
         "ego m/s",
-        "cells"
+        "cells",
+        "object"
     );
     for e in events {
         let _ = writeln!(
             out,
-            "{:>4}  {:>22}  {:>7.2}  {:>8.2}  {:>8.3}  {:>8.1}  {:>8.1}  {:>7.2}  {:>6}  {:>7}  {:>6}",
+            "{:>4}  {:>22}  {:>7.2}  {:>8.2}  {:>8.3}  {:>8.1}  {:>8.1}  {:>7.2}  {:>6}  {:>7}  {:>6}  {:>6}",
             e.id,
             crate::model::format_log_time(e.start_log_time_ns),
             e.duration_s,
@@ -86,7 +87,8 @@ pub fn events_table(events: &[NearMissEvent]) -> String {
             e.peak
                 .ego_speed_mps
                 .map_or("-".into(), |v| format!("{v:.1}")),
-            e.max_cluster_cells
+            e.max_cluster_cells,
+            e.object_id.map_or("-".into(), |id| id.to_string())
         );
     }
     out

@@ -47,6 +47,12 @@ pub struct FleetNearMiss {
     /// Its clip (`--clips`), relative to `OUT_DIR`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub clip: Option<PathBuf>,
+    /// The tracked object it was (`/looming/object_list` id in its output).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_id: Option<u32>,
+    /// Distance of that object (or of its cluster, on no object) from the
+    /// vehicle's swept path at the peak, m.
+    pub lateral_offset_m: f64,
 }
 
 /// Every near miss of `records`, ranked: smallest time to contact first,
@@ -78,6 +84,8 @@ pub fn ranked_near_misses(records: &[LogRecord]) -> Vec<FleetNearMiss> {
                     .iter()
                     .find(|c| c.event_id == event.id)
                     .map(|c| c.path.clone()),
+                object_id: event.object_id,
+                lateral_offset_m: event.peak.lateral_offset_m,
             }
         })
         .collect()
@@ -183,12 +191,12 @@ fn foxglove_event(rank: usize, record: &LogRecord, event: &NearMissEvent) -> ser
 /// The ranking as CSV (paths quoted).
 fn csv_text(near_misses: &[FleetNearMiss]) -> String {
     let mut text = String::from(
-        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture,clip\n",
+        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture,clip,object_id,lateral_offset_m\n",
     );
     let quoted = |path: &Path| format!("\"{}\"", path.display().to_string().replace('"', "\"\""));
     for n in near_misses {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{},{},{},{:.2}\n",
             n.rank,
             quoted(&n.log),
             n.output.as_deref().map_or(String::new(), quoted),
@@ -205,6 +213,8 @@ fn csv_text(near_misses: &[FleetNearMiss]) -> String {
             n.range_picture.as_deref().map_or(String::new(), quoted),
             n.top_picture.as_deref().map_or(String::new(), quoted),
             n.clip.as_deref().map_or(String::new(), quoted),
+            n.object_id.map_or(String::new(), |id| id.to_string()),
+            n.lateral_offset_m,
         ));
     }
     text

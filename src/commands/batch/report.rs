@@ -87,11 +87,7 @@ fn write_near_misses(html: &mut String, records: &[LogRecord], near_misses: &[Fl
             bearing(n.bearing_deg),
             n.ego_speed_mps
                 .map_or("-".to_owned(), |v| format!("{v:.1}")),
-            if n.moving {
-                "<span class=\"moving\">moving</span>"
-            } else {
-                "static"
-            },
+            object_cell(n),
             escape(&n.log.display().to_string()),
             n.event_id,
             when(records, n),
@@ -101,6 +97,23 @@ fn write_near_misses(html: &mut String, records: &[LogRecord], near_misses: &[Fl
         );
     }
     html.push_str("</table>\n");
+}
+
+/// The object column: its track id, whether it moved on its own, and how
+/// far it was from the swept path.
+fn object_cell(near_miss: &FleetNearMiss) -> String {
+    let motion = if near_miss.moving {
+        "<span class=\"moving\">moving</span>"
+    } else {
+        "static"
+    };
+    let id = near_miss
+        .object_id
+        .map_or(String::new(), |id| format!("#{id} "));
+    format!(
+        "{id}{motion}<br>{:.1} m from the path",
+        near_miss.lateral_offset_m
+    )
 }
 
 /// When a near miss happened: seconds into its log (after its first pair,

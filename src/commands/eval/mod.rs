@@ -3,14 +3,18 @@
 //! pairs its scans like `process`, runs the engine and compares, per quantity
 //! and per class of cell, with the truth of the same points.
 
+mod accumulator;
 mod external;
+
+use accumulator::Accumulator;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use crate::engine::{self, EngineConfig, PairLooming};
+use crate::engine::{self, EngineConfig};
 use crate::input::InputFile;
 use crate::model::{Scan, ScanPair, StampNs};
+use crate::objects::{ObjectConfig, ObjectTracker, PairObjects};
 use crate::pipeline::{ReplayError, ReplayReport, ScanOptions, replay_input};
 use crate::truth::{self, PointTruth};
 
@@ -202,135 +206,6 @@ fn is_zero(count: &u64) -> bool {
     *count == 0
 }
 
-#[derive(Default)]
-struct Accumulator {
-    errors: BTreeMap<String, BTreeMap<String, ErrorStats>>,
-    detection: Detection,
-    actor_cells: u64,
-    actor_cells_flagged: u64,
-}
-
-impl Accumulator {
-    fn add(&mut self, quantity: &str, class: &str, error: f64) {
-        self.errors
-            .entry(quantity.to_string())
-            .or_default()
-            .entry(class.to_string())
-            .or_default()
-            .add(error);
-    }
-
-    fn add_pair(&mut self, scan: &Scan, result: &PairLooming, truth: &ScanTruth) {
-        let truth_of = |point: usize| truth.of(scan, point);
-        // Per point: L_ego against the true point looming.
-        if result.availability.ego_velocity {
-            for (point, &l_ego) in result.l_ego.iter().enumerate() {
-                let Some(t) = truth_of(point) else { continue };
-                if !l_ego.is_finite() {
-                    continue;
-                }
-                let error = f64::from(l_ego) - f64::from(t.point_looming);
-                if t.moving {
-                    // L_ego treats moving objects as static: this is its blind spot.
-                    self.add("l_ego", "moving_points", error);
-                    continue;
-                }
-                self.add("l_ego", "static_points", error);
-                if t.point_looming.abs() > 0.05 {
-                    self.add(
-                        "l_ego_relative",
-                        "static_points",
-                        error / f64::from(t.point_looming),
-                    );
-                }
-            }
-        }
-        for cell in 0..result.geometry.cells() {
-            let point = result.image.point[cell];
-            if point == engine::NO_POINT {
-                continue;
-            }
-            let Some(t) = truth_of(point as usize) else {
-                continue;
-            };
-            let masked = result.mask[cell] != 0;
-            let class = if masked {
-                "masked"
-            } else if t.moving {
-                "moving"
-            } else if t.surface == 0 {
-                "static_road"
-            } else if t.incidence_cos >= 0.5 {
-                "static_facing"
-            } else {
-                "static_oblique"
-            };
-            let truth_ray = f64::from(t.ray_looming);
-            let mut add = |quantity: &str, value: f32, truth: f64| {
-                if value.is_finite() {
-                    let error = f64::from(value) - truth;
-                    self.add(quantity, class, error);
-                    if !masked {
-                        self.add(quantity, "all_unmasked", error);
-                    }
-                }
-            };
-            add("l_lidar", result.l_lidar[cell], truth_ray);
-            add("fused", result.fused[cell], truth_ray);
-            if result.availability.ego_velocity {
-                add("l_ray_ego", result.l_ray_ego[cell], truth_ray);
-                add(
-                    "disagreement",
-                    result.disagreement[cell],
-                    f64::from(t.own_motion_looming),
-                );
-            }
-            if masked || !result.availability.ego_velocity {
-                continue;
-            }
-            let truly_moving = f64::from(t.own_motion_looming).abs() >= OBSERVABLE_MOTION_PER_S;
-            let flagged = result.moving[cell];
-            let d = &mut self.detection;
-            match (flagged, truly_moving) {
-                (true, true) => d.true_positive += 1,
-                (true, false) => d.false_positive += 1,
-                (false, true) => d.false_negative += 1,
-                (false, false) => d.true_negative += 1,
-            }
-            if t.moving {
-                self.actor_cells += 1;
-                self.actor_cells_flagged += u64::from(flagged);
-            }
-        }
-    }
-
-    fn finish(mut self) -> (BTreeMap<String, BTreeMap<String, Summary>>, Detection) {
-        let d = &mut self.detection;
-        let ratio = |a: u64, b: u64| {
-            if b == 0 {
-                f64::NAN
-            } else {
-                a as f64 / b as f64
-            }
-        };
-        d.precision = ratio(d.true_positive, d.true_positive + d.false_positive);
-        d.recall = ratio(d.true_positive, d.true_positive + d.false_negative);
-        d.f1 = 2.0 * d.precision * d.recall / (d.precision + d.recall);
-        d.recall_all_actor_cells = ratio(self.actor_cells_flagged, self.actor_cells);
-        let errors = self
-            .errors
-            .into_iter()
-            .map(|(q, classes)| {
-                (
-                    q,
-                    classes.into_iter().map(|(c, s)| (c, s.summary())).collect(),
-                )
-            })
-            .collect();
-        (errors, self.detection)
-    }
-}
-
 /// Evaluate the engine on `path` with `config`, against the log's own truth.
 pub fn evaluate(path: &Path, config: &EngineConfig) -> Result<EvalReport, EvalError> {
     evaluate_against(path, config, None, &ScanOptions::default())
@@ -429,6 +304,8 @@ fn own_truth(
 struct EvalState<'c> {
     config: &'c EngineConfig,
     cache: engine::EngineCache,
+    /// The objects' ids and velocities, as `process` follows them.
+    tracker: ObjectTracker,
     accumulator: Accumulator,
     pairs: u64,
     with_ego: u64,
@@ -439,6 +316,7 @@ impl<'c> EvalState<'c> {
         Self {
             config,
             cache: engine::EngineCache::default(),
+            tracker: ObjectTracker::default(),
             accumulator: Accumulator::default(),
             pairs: 0,
             with_ego: 0,
@@ -446,12 +324,23 @@ impl<'c> EvalState<'c> {
     }
 
     fn evaluate_pair(&mut self, pair: &ScanPair, truth: &ScanTruth) {
-        let Some(result) = engine::compute_with_cache(pair, self.config, &mut self.cache) else {
+        let Some(mut result) = engine::compute_with_cache(pair, self.config, &mut self.cache)
+        else {
             return;
         };
         self.pairs += 1;
         self.with_ego += u64::from(result.availability.ego_velocity);
-        self.accumulator.add_pair(&pair.current, &result, truth);
+        // What users see: the fused looming after the objects' feedback.
+        let engine = (result.mask.clone(), result.fused.clone());
+        let (objects, _) = PairObjects::find_tracked_fused(
+            &pair.current,
+            &mut result,
+            (&ObjectConfig::default(), &self.config.threat_ttc_s),
+            &mut self.tracker,
+            pair.dt_s,
+        );
+        self.accumulator
+            .add_pair(&pair.current, (&result, &engine), &objects, truth);
     }
 
     fn report(self, path: &Path) -> EvalReport {
@@ -490,7 +379,7 @@ impl EvalReport {
         for (quantity, classes) in &self.errors {
             for class in CLASSES
                 .iter()
-                .chain(["static_points", "moving_points"].iter())
+                .chain(["static_points", "moving_points", "static", "all"].iter())
             {
                 if let Some(s) = classes.get(*class) {
                     let _ = writeln!(

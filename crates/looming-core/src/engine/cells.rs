@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::model::{PairMotion, StampNs};
 
 use super::config::EngineConfig;
+use super::egomotion::EgoEstimate;
 use super::grid::ImageGeometry;
 use super::result::mask;
 use super::surface::Surfaces;
@@ -25,6 +26,8 @@ pub(super) struct CellValues {
     pub(super) disagrees: Vec<bool>,
     pub(super) moving: Vec<bool>,
     pub(super) fused: Vec<f32>,
+    pub(super) fused_sigma: Vec<f32>,
+    pub(super) ray_ego_sigma: Vec<f32>,
     pub(super) threat: Vec<ThreatLevel>,
     pub(super) dt_s: Vec<f32>,
 }
@@ -35,6 +38,9 @@ struct Raw {
     l_lidar: f32,
     l_ray_ego: f32,
     sigma: f32,
+    /// Noise of `l_ray_ego`: the ego prediction's model error and, where the
+    /// motion was estimated from the scans, that estimate's uncertainty.
+    sigma_ego: f32,
     mask: u8,
     dt_s: f32,
 }
@@ -49,7 +55,7 @@ pub(super) fn per_cell(
     current_time: &[StampNs],
     rotated: &warp::Rendered,
     moved: Option<&warp::Rendered>,
-    motion: &PairMotion,
+    (motion, estimate): (&PairMotion, Option<&EgoEstimate>),
 ) -> CellValues {
     let raw = raw_cells(
         config,
@@ -58,23 +64,24 @@ pub(super) fn per_cell(
         current_time,
         rotated,
         moved,
-        motion,
+        (motion, estimate),
     );
     let candidate: Vec<bool> = raw
         .par_iter()
         .map(|r| {
             let d = r.l_lidar - r.l_ray_ego;
+            let sigma_d = f64::from(r.sigma).hypot(f64::from(r.sigma_ego));
             r.mask == 0
                 && d.is_finite()
                 && f64::from(d.abs())
-                    > (config.moving_sigmas * f64::from(r.sigma)).max(config.moving_min_per_s)
+                    > (config.moving_sigmas * sigma_d).max(config.moving_min_per_s)
         })
         .collect();
     let moving = moving_patches(geometry, &candidate);
-    let pointwise: Vec<f32> = (0..geometry.cells())
+    let (pointwise, fused_sigma): (Vec<f32>, Vec<f32>) = (0..geometry.cells())
         .into_par_iter()
         .map(|cell| fuse(geometry, &raw, &moving, candidate[cell], cell))
-        .collect();
+        .unzip();
     let fused = smoothed_static(geometry, current, &raw, (&moving, &candidate), &pointwise);
     let threat = threat_levels(config, &fused, &raw);
     // Each field on both cores (eight passes over the image).
@@ -85,11 +92,13 @@ pub(super) fn per_cell(
         l_ray_ego: field(|r| r.l_ray_ego),
         confidence: field(|r| 1.0 / (1.0 + (r.sigma / 0.05).powi(2))),
         sigma: field(|r| r.sigma),
+        ray_ego_sigma: field(|r| r.sigma_ego),
         mask: raw.par_iter().map(|r| r.mask).collect(),
         dt_s: field(|r| r.dt_s),
         disagrees: candidate,
         moving,
         fused,
+        fused_sigma,
         threat,
     }
 }
@@ -104,7 +113,7 @@ fn raw_cells(
     current_time: &[StampNs],
     rotated: &warp::Rendered,
     moved: Option<&warp::Rendered>,
-    motion: &PairMotion,
+    (motion, estimate): (&PairMotion, Option<&EgoEstimate>),
 ) -> Vec<Raw> {
     (0..geometry.cells())
         .into_par_iter()
@@ -113,7 +122,13 @@ fn raw_cells(
         .map_init(
             || [0, 0],
             |hints, cell| {
-                let raw = raw_cell(config, current, current_time, rotated, moved, cell);
+                let raw = raw_cell(
+                    config,
+                    (current, current_time),
+                    rotated,
+                    (moved, estimate),
+                    cell,
+                );
                 match moved {
                     Some(moved) => to_instant(
                         raw,
@@ -201,16 +216,16 @@ fn threat_levels(config: &EngineConfig, fused: &[f32], raw: &[Raw]) -> Vec<Threa
 
 fn raw_cell(
     config: &EngineConfig,
-    current: &Surfaces,
-    current_time: &[StampNs],
+    (current, current_time): (&Surfaces, &[StampNs]),
     rotated: &warp::Rendered,
-    moved: Option<&warp::Rendered>,
+    (moved, estimate): (Option<&warp::Rendered>, Option<&EgoEstimate>),
     cell: usize,
 ) -> Raw {
     let nan = Raw {
         l_lidar: f32::NAN,
         l_ray_ego: f32::NAN,
         sigma: f32::NAN,
+        sigma_ego: f32::NAN,
         mask: mask::EMPTY,
         dt_s: f32::NAN,
     };
@@ -286,13 +301,44 @@ fn raw_cell(
     let sigma_now = noise_m * (1.0 / support).sqrt().max(0.4);
     let sigma_before = noise_m * 0.6;
     let sigma = (sigma_now.powi(2) + sigma_before.powi(2)).sqrt() / (dt_s * range_now);
+    let sigma_ego = ray_ego_sigma(current, cell, l_ray_ego, estimate);
     Raw {
         l_lidar: l_lidar as f32,
         l_ray_ego: l_ray_ego as f32,
         sigma: sigma as f32,
+        sigma_ego: sigma_ego as f32,
         mask: flags,
         dt_s: dt_s as f32,
     }
+}
+
+/// The noise of a cell's ego prediction `l_ray_ego_per_s`: a measured
+/// velocity's error (about 1 %) and the interpolation of the previous surface,
+/// and where the motion was estimated from the scans, that estimate's
+/// uncertainty carried to the cell's ray ([`EgoEstimate::ray_looming_sigma_per_s`]).
+/// On a log without a velocity source the estimate can be pulled by movers
+/// (a car passing beside a stopped ego made it read half a metre per second
+/// backwards on KITTI): then the measurement must outweigh it.
+fn ray_ego_sigma(
+    current: &Surfaces,
+    cell: usize,
+    l_ray_ego_per_s: f64,
+    estimate: Option<&EgoEstimate>,
+) -> f64 {
+    let model = 0.01 * l_ray_ego_per_s.abs() + 0.005;
+    let Some(estimate) = estimate else {
+        return model;
+    };
+    let range_m = f64::from(current.range_m[cell]);
+    let [dx, dy, dz] = current.direction[cell].map(f64::from);
+    let [nx, ny, nz] = current.normal[cell].map(f64::from);
+    let facing_cos = f64::from(current.incidence_cos[cell]).max(0.15);
+    let estimated = estimate.ray_looming_sigma_per_s(
+        nalgebra::Vector3::new(dx, dy, dz) * range_m,
+        nalgebra::Vector3::new(nx, ny, nz),
+        facing_cos,
+    );
+    model.hypot(estimated)
 }
 
 /// A difference over `dt` measures the looming of the mean ego velocity over
@@ -399,18 +445,22 @@ fn fuse(
     moving: &[bool],
     disagrees: bool,
     cell: usize,
-) -> f32 {
+) -> (f32, f32) {
     let r = raw[cell];
     if !r.l_lidar.is_finite() {
-        return f32::NAN;
+        return (f32::NAN, f32::NAN);
     }
     // A significant disagreement outside any moving patch is either a small
-    // mover or an artefact of one of the two: neither is to be trusted alone.
+    // mover or an artefact of one of the two: neither is to be trusted alone
+    // (their half difference is the uncertainty of their mean).
     if disagrees && !moving[cell] {
         return if r.l_ray_ego.is_finite() {
-            0.5 * (r.l_lidar + r.l_ray_ego)
+            (
+                0.5 * (r.l_lidar + r.l_ray_ego),
+                (0.5 * (r.l_lidar - r.l_ray_ego).abs()).max(r.sigma),
+            )
         } else {
-            r.l_lidar
+            (r.l_lidar, r.sigma)
         };
     }
     if moving[cell] {
@@ -420,17 +470,16 @@ fn fuse(
             .chain(geometry.neighbours_3x3(cell))
             .filter(|&n| moving[n] && raw[n].l_lidar.is_finite() && raw[n].mask == 0)
             .map(|n| raw[n].l_lidar);
-        return median_3x3(values).unwrap_or(r.l_lidar);
+        return (median_3x3(values).unwrap_or(r.l_lidar), r.sigma);
     }
     if !r.l_ray_ego.is_finite() {
-        return r.l_lidar;
+        return (r.l_lidar, r.sigma);
     }
-    // The ego prediction's own error: velocity error (about 1 %) and the
-    // interpolation of the previous surface.
-    let sigma_ego = 0.01 * f64::from(r.l_ray_ego.abs()) + 0.005;
-    let w_ego = 1.0 / sigma_ego.powi(2);
+    let w_ego = 1.0 / f64::from(r.sigma_ego).max(1e-6).powi(2);
     let w_lidar = 1.0 / f64::from(r.sigma).max(1e-6).powi(2);
-    ((f64::from(r.l_ray_ego) * w_ego + f64::from(r.l_lidar) * w_lidar) / (w_ego + w_lidar)) as f32
+    let value =
+        (f64::from(r.l_ray_ego) * w_ego + f64::from(r.l_lidar) * w_lidar) / (w_ego + w_lidar);
+    (value as f32, (1.0 / (w_ego + w_lidar)).sqrt() as f32)
 }
 
 #[cfg(test)]

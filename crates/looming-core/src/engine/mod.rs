@@ -274,7 +274,7 @@ fn compute_from_surfaces(
         &cur_time,
         &rotated,
         moved.as_ref(),
-        motion,
+        (motion, ego_estimate.as_ref()),
     );
     let availability = Availability {
         ego_velocity: full.is_some(),
@@ -361,6 +361,8 @@ fn pair_looming(
         disagrees: cells.disagrees,
         moving: cells.moving,
         fused: cells.fused,
+        fused_sigma_per_s: cells.fused_sigma,
+        ray_ego_sigma_per_s: cells.ray_ego_sigma,
         threat: cells.threat,
         incidence_cos: cur_surfaces.incidence_cos.clone(),
         normal: cur_surfaces.normal.clone(),

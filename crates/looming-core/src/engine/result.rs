@@ -56,6 +56,11 @@ pub struct PairLooming {
     pub disagrees: Vec<bool>,
     pub moving: Vec<bool>,
     pub fused: Vec<f32>,
+    /// Per cell: the noise (1 sigma) of `fused`, 1/s.
+    pub fused_sigma_per_s: Vec<f32>,
+    /// Per cell: the noise of `l_ray_ego`, 1/s: the prediction's model error
+    /// and, where the motion was estimated, that estimate's uncertainty.
+    pub ray_ego_sigma_per_s: Vec<f32>,
     pub threat: Vec<ThreatLevel>,
     /// Per cell: `|n . e|` of the current surface (1 where no plane was fitted).
     pub incidence_cos: Vec<f32>,

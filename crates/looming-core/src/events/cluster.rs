@@ -6,6 +6,7 @@ use nalgebra::Vector3;
 
 use crate::engine::{ImageGeometry, NO_POINT, PairLooming, mask};
 use crate::model::Scan;
+use crate::objects::{NO_OBJECT, PairObjects};
 
 use super::EventConfig;
 use super::corridor::Corridor;
@@ -26,8 +27,12 @@ pub struct Cluster {
     /// 10th percentile of its cells' ranges, metres: the near side, which
     /// closes at the closing speed.
     pub near_range_m: f64,
-    /// Smallest distance of its cells from the ego path, metres.
+    /// Smallest distance from the ego path of the object it lies on (all of
+    /// the object's returns, hot or not), or of its own cells when on no
+    /// object, metres.
     pub lateral_offset_m: f64,
+    /// The tracked object most of its cells belong to.
+    pub object_id: Option<u32>,
     /// Cells flagged moving by the disagreement.
     pub moving_cells: usize,
 }
@@ -101,7 +106,7 @@ impl ColSpan {
 /// is seen at its full size.
 pub fn hot_clusters(
     looming: &PairLooming,
-    scan: &Scan,
+    (scan, objects): (&Scan, Option<&PairObjects>),
     corridor: &Corridor,
     config: &EventConfig,
     min_cells: usize,
@@ -126,13 +131,13 @@ pub fn hot_clusters(
     connected_components(geometry, &hot)
         .into_iter()
         .filter(|cells| cells.len() >= min_cells)
-        .map(|cells| describe(looming, corridor, &cells, &position))
+        .map(|cells| describe(looming, (corridor, objects), &cells, &position))
         // An object covers an area; a line of cells one beam or one column
         // wide is the trace of an edge or of the sweep's seam.
         .filter(|cluster| cluster.rows.1 > cluster.rows.0 && cluster.cols.len >= 2)
         .filter(|cluster| {
             cluster.looming_per_s >= threshold_per_s
-                && cluster.lateral_offset_m <= config.corridor_half_width_m
+                && cluster.lateral_offset_m <= config.corridor_half_width_m()
                 && plausible_if_static(cluster, looming.velocity_mps, config.facing_cos)
         })
         .collect()
@@ -146,7 +151,7 @@ pub fn hot_clusters(
 /// edge spikes set; `None` when nothing in the path approaches that fast.
 pub fn path_peak_looming(
     looming: &PairLooming,
-    scan: &Scan,
+    (scan, objects): (&Scan, Option<&PairObjects>),
     corridor: &Corridor,
     config: &EventConfig,
     min_cells: usize,
@@ -155,7 +160,7 @@ pub fn path_peak_looming(
         ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S.max(config.ttc_threshold_s),
         ..config.clone()
     };
-    hot_clusters(looming, scan, corridor, &floor, min_cells)
+    hot_clusters(looming, (scan, objects), corridor, &floor, min_cells)
         .iter()
         .map(|cluster| cluster.looming_per_s)
         .max_by(f64::total_cmp)
@@ -252,7 +257,7 @@ fn connected_components(geometry: &ImageGeometry, hot: &[bool]) -> Vec<Vec<usize
 
 fn describe(
     looming: &PairLooming,
-    corridor: &Corridor,
+    (corridor, objects): (&Corridor, Option<&PairObjects>),
     cells: &[usize],
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> Cluster {
@@ -282,10 +287,19 @@ fn describe(
     ranges.sort_unstable_by(f64::total_cmp);
     let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
     let centroid = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
-    let lateral_offset_m = points
-        .iter()
-        .map(|p| corridor.offset_m(p))
-        .fold(f64::INFINITY, f64::min);
+    let object = objects.and_then(|o| dominant_object(o, cells));
+    let lateral_offset_m = match object {
+        // The object's whole footprint: an object in the path counts whole,
+        // one beside it never, whichever of its parts is hot.
+        Some((objects, index)) => {
+            let horizon_s = (1.0 / values[values.len() / 2]).clamp(0.0, PREDICTION_HORIZON_S);
+            object_offset_m(objects, index, (corridor, horizon_s), position)
+        }
+        None => points
+            .iter()
+            .map(|p| corridor.offset_m(p))
+            .fold(f64::INFINITY, f64::min),
+    };
     let mut occupied: Vec<usize> = cells.iter().map(|&c| c % cols).collect();
     occupied.sort_unstable();
     occupied.dedup();
@@ -299,9 +313,75 @@ fn describe(
         range_m: ranges[ranges.len() / 2],
         near_range_m: ranges[ranges.len() / 10],
         lateral_offset_m,
+        object_id: object.map(|(objects, index)| objects.objects[index].id),
         moving_cells: cells.iter().filter(|&&c| looming.moving[c]).count(),
     }
 }
+
+/// The object (index in `objects.objects`) at least half of `cells` belong
+/// to.
+fn dominant_object<'o>(
+    objects: &'o PairObjects,
+    cells: &[usize],
+) -> Option<(&'o PairObjects, usize)> {
+    let mut counts: std::collections::BTreeMap<u32, usize> = std::collections::BTreeMap::new();
+    for &cell in cells {
+        let object = objects.cell_object.get(cell).copied().unwrap_or(NO_OBJECT);
+        if object != NO_OBJECT {
+            *counts.entry(object).or_default() += 1;
+        }
+    }
+    let (&index, &count) = counts.iter().max_by_key(|&(_, n)| *n)?;
+    (2 * count >= cells.len() && (index as usize) < objects.objects.len())
+        .then_some((objects, index as usize))
+}
+
+/// Smallest distance of the object's returns from the ego path, m, now or,
+/// for an object moving on its own (its track's velocity over the ground at
+/// least [`MIN_PREDICTED_SPEED_MPS`]), at any time up to `horizon_s` ahead
+/// (its time to contact, at most [`PREDICTION_HORIZON_S`]): a pedestrian
+/// walking into the lane is in the path before it reaches it.
+fn object_offset_m(
+    objects: &PairObjects,
+    index: usize,
+    (corridor, horizon_s): (&Corridor, f64),
+    position: &dyn Fn(usize) -> Option<Vector3<f64>>,
+) -> f64 {
+    let points: Vec<Vector3<f64>> = objects
+        .cell_object
+        .iter()
+        .enumerate()
+        .filter(|&(_, &o)| o as usize == index)
+        .filter_map(|(cell, _)| position(cell))
+        .collect();
+    let offset_after = |shift: Vector3<f64>| {
+        points
+            .iter()
+            .map(|p| corridor.offset_m(&(p + shift)))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let now = offset_after(Vector3::zeros());
+    let velocity = objects.objects[index]
+        .velocity_mps
+        .map(Vector3::from)
+        .map(|v| Vector3::new(v.x, v.y, 0.0))
+        .filter(|v| v.norm() >= MIN_PREDICTED_SPEED_MPS);
+    let Some(velocity) = velocity else {
+        return now;
+    };
+    let steps = (horizon_s / PREDICTION_STEP_S).ceil() as usize;
+    (1..=steps)
+        .map(|k| offset_after(velocity * (k as f64 * PREDICTION_STEP_S).min(horizon_s)))
+        .fold(now, f64::min)
+}
+
+/// The farthest ahead an object's own motion is followed into the path, s.
+const PREDICTION_HORIZON_S: f64 = 2.0;
+/// ... in steps of, s.
+const PREDICTION_STEP_S: f64 = 0.1;
+/// Slower than this (m/s over the ground) an object is taken to stand: its
+/// track's velocity is then centroid noise.
+const MIN_PREDICTED_SPEED_MPS: f64 = 0.5;
 
 #[cfg(test)]
 mod tests {

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::engine::{ImageGeometry, PairLooming};
 use crate::model::Scan;
 use crate::model::ScanPair;
+use crate::objects::PairObjects;
 
 pub use cluster::{Cluster, ColSpan, PATH_PEAK_FLOOR_TTC_S, hot_clusters, path_peak_looming};
 pub use corridor::{Corridor, PathSource};
@@ -39,11 +40,20 @@ pub struct EventConfig {
     pub min_pairs: u64,
     /// Pairs an event may miss without ending (one noisy scan does not split it).
     pub max_gap_pairs: u64,
-    /// Half width of the ego corridor, metres: vehicle half width plus clearance.
-    pub corridor_half_width_m: f64,
+    /// Width of the ego vehicle, metres: its swept path is this wide ...
+    pub vehicle_width_m: f64,
+    /// ... plus this margin either side, metres.
+    pub path_margin_m: f64,
     /// Only surfaces facing the sensor this much (`|n . e|`) count: near
     /// grazing, range along a ray changes fast without anything approaching.
     pub facing_cos: f64,
+}
+
+impl EventConfig {
+    /// Half width of the swept path: half the vehicle plus the margin, m.
+    pub fn corridor_half_width_m(&self) -> f64 {
+        0.5 * self.vehicle_width_m + self.path_margin_m
+    }
 }
 
 impl Default for EventConfig {
@@ -53,8 +63,12 @@ impl Default for EventConfig {
             min_cells: None,
             min_pairs: 2,
             max_gap_pairs: 1,
-            // A 2 m wide car (1 m) plus 1 m of clearance.
-            corridor_half_width_m: 2.0,
+            // A passenger car (1.8-1.9 m without mirrors) with half a metre
+            // either side: what passes closer is a near miss whatever its
+            // speed; a parked car or a kerb-side wall 2 m from the path (a
+            // car passes those every second in a city) is not.
+            vehicle_width_m: 1.9,
+            path_margin_m: 0.5,
             facing_cos: 0.5,
         }
     }
@@ -109,6 +123,10 @@ pub struct NearMissEvent {
     pub moving: bool,
     pub frame_id: String,
     pub corridor: PathSource,
+    /// The tracked object (`/looming/object_list` id) the event's clusters
+    /// belonged to most often; absent when they were on no object.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_id: Option<u32>,
     /// Stamps and log times of the hot scans (at most 600).
     pub scan_stamps_ns: Vec<i64>,
     pub scan_log_times_ns: Vec<u64>,
@@ -134,6 +152,9 @@ pub struct EventPeak {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ego_speed_mps: Option<f64>,
     pub cluster_cells: usize,
+    /// The tracked object the peak's cluster lay on; absent when none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object_id: Option<u32>,
 }
 
 /// The `--events` file.
@@ -162,6 +183,9 @@ pub fn rank(events: &mut [NearMissEvent]) {
 pub struct PairFrame<'a> {
     pub pair: &'a ScanPair,
     pub looming: &'a PairLooming,
+    /// The pair's objects, tracked: an event is then judged in the path by
+    /// its object's whole footprint and names it.
+    pub objects: Option<&'a PairObjects>,
 }
 
 /// A cluster followed over pairs.
@@ -186,6 +210,8 @@ struct Track {
     last_near_range: (i64, f64),
     /// The cluster's looming in the last hot pair, 1/s.
     last_looming_per_s: f64,
+    /// Hot pairs per tracked object the clusters lay on.
+    objects: std::collections::BTreeMap<u32, u64>,
 }
 
 /// Follows hot clusters over pairs and reports near-miss events.
@@ -242,7 +268,7 @@ impl EventDetector {
         let corridor = Corridor::new(
             velocity,
             looming.angular_velocity_radps.map(Vector3::from),
-            self.config.corridor_half_width_m,
+            self.config.corridor_half_width_m(),
         );
         self.frame_id.clone_from(&scan.frame_id);
         self.corridor_source = corridor.source;
@@ -251,7 +277,13 @@ impl EventDetector {
             .min_cells
             .unwrap_or_else(|| default_min_cells(&looming.geometry));
         self.min_cells_used = Some(min_cells);
-        let clusters = hot_clusters(looming, scan, &corridor, &self.config, min_cells);
+        let clusters = hot_clusters(
+            looming,
+            (scan, frame.objects),
+            &corridor,
+            &self.config,
+            min_cells,
+        );
         // The floor's clusters can merge a hot object with its slower
         // surroundings; the hot clusters keep the curve at or above the
         // threshold wherever an event is hot.
@@ -259,7 +291,13 @@ impl EventDetector {
             .iter()
             .map(|c| c.looming_per_s)
             .max_by(f64::total_cmp);
-        let floor = path_peak_looming(looming, scan, &corridor, &self.config, min_cells);
+        let floor = path_peak_looming(
+            looming,
+            (scan, frame.objects),
+            &corridor,
+            &self.config,
+            min_cells,
+        );
         self.path_peak_per_s = match (hottest, floor) {
             (Some(a), Some(b)) => Some(a.max(b)),
             (a, b) => a.or(b),
@@ -404,6 +442,7 @@ impl Track {
             stamps: Vec::new(),
             last_near_range: (sample.stamp_ns, cluster.near_range_m),
             last_looming_per_s: cluster.looming_per_s,
+            objects: std::collections::BTreeMap::new(),
         };
         track.extend(sample);
         track.update(cluster, sample);
@@ -462,6 +501,9 @@ impl Track {
         self.max_cells = self.max_cells.max(cluster.cells);
         self.cells += cluster.cells;
         self.moving_cells += cluster.moving_cells;
+        if let Some(id) = cluster.object_id {
+            *self.objects.entry(id).or_default() += 1;
+        }
         if cluster.looming_per_s > self.peak.looming_per_s {
             self.peak = peak_of(cluster, sample);
         }
@@ -487,6 +529,9 @@ impl Track {
         self.moving_cells += other.moving_cells;
         if other.peak.looming_per_s > self.peak.looming_per_s {
             self.peak = other.peak;
+        }
+        for (id, pairs) in other.objects {
+            *self.objects.entry(id).or_default() += pairs;
         }
         let mut stamps = std::mem::take(&mut self.stamps);
         stamps.extend(other.stamps);
@@ -518,11 +563,20 @@ impl Track {
             moving: moving_fraction >= 0.5,
             frame_id: frame_id.to_string(),
             corridor,
+            object_id: most_frequent(&self.objects),
             scan_stamps_ns: self.stamps.iter().map(|s| s.0).collect(),
             scan_log_times_ns: self.stamps.iter().map(|s| s.1).collect(),
             peak: self.peak,
         }
     }
+}
+
+/// The key counted most (the smallest of equals).
+fn most_frequent(counts: &std::collections::BTreeMap<u32, u64>) -> Option<u32> {
+    counts
+        .iter()
+        .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+        .map(|(&id, _)| id)
 }
 
 fn peak_of(cluster: &Cluster, sample: &Sample) -> EventPeak {
@@ -538,6 +592,7 @@ fn peak_of(cluster: &Cluster, sample: &Sample) -> EventPeak {
         lateral_offset_m: cluster.lateral_offset_m,
         ego_speed_mps: sample.ego_speed_mps,
         cluster_cells: cluster.cells,
+        object_id: cluster.object_id,
     }
 }
 
@@ -562,6 +617,7 @@ mod tests {
             range_m: near_range_m + 0.2,
             near_range_m,
             lateral_offset_m: 0.0,
+            object_id: Some(7),
             moving_cells: 40,
         }
     }
@@ -613,6 +669,28 @@ mod tests {
         assert!((event.peak_looming_per_s - 8.0 / 8.4).abs() < 1e-12);
         assert!((event.min_time_to_contact_s - 8.4 / 8.0).abs() < 1e-12);
         assert!(event.moving && (event.moving_fraction - 40.0 / 60.0).abs() < 1e-12);
+        // It names the object its clusters lay on.
+        assert_eq!(event.object_id, Some(7));
+        assert_eq!(event.peak.object_id, Some(7));
+    }
+
+    #[test]
+    fn the_swept_path_is_the_vehicle_plus_its_margin() {
+        let config = EventConfig::default();
+        assert!((config.corridor_half_width_m() - 1.45).abs() < 1e-12);
+        let wide = EventConfig {
+            vehicle_width_m: 2.5,
+            path_margin_m: 1.0,
+            ..config
+        };
+        assert!((wide.corridor_half_width_m() - 2.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_object_counted_most_names_the_event() {
+        let counts = std::collections::BTreeMap::from([(3, 2), (5, 4), (9, 4)]);
+        assert_eq!(most_frequent(&counts), Some(5));
+        assert_eq!(most_frequent(&std::collections::BTreeMap::new()), None);
     }
 
     #[test]

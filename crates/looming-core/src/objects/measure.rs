@@ -12,6 +12,13 @@
 //! cell), which a few wrong cells (a silhouette, a reflection) cannot move;
 //! its standard error is `1.4826` times the weighted median absolute
 //! deviation over the square root of the effective number of cells.
+//!
+//! On an object that does not move on its own (its `D` within four standard
+//! errors, the ego prediction's uncertainty included, or below 0.15 1/s) the
+//! ego prediction measures the same looming: the weighted median of
+//! `L_ray_ego` over the same cells, whose error is that of the motion (for a
+//! motion estimated from the scans, its covariance carried to the object),
+//! joins the measurement by inverse variance.
 
 use super::ground::cell_point;
 use super::{NO_OBJECT, Object};
@@ -102,14 +109,25 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
             .filter(|&c| measures_approach(looming, c, MIN_SIDE_ON_COS))
             .collect();
     }
-    let looming_fit = robust_mean(&measured, &looming.l_lidar, &looming.sigma_per_s);
+    let lidar_fit = robust_mean(&measured, &looming.l_lidar, &looming.sigma_per_s);
+    let ego_sigma = ego_prediction_sigma(looming, &measured);
     let disagreement_fit = looming
         .availability
         .ego_velocity
         .then(|| robust_mean(&measured, &looming.disagreement, &looming.sigma_per_s))
-        .flatten();
+        .flatten()
+        .map(|(d, se)| (d, se.hypot(ego_sigma.unwrap_or(0.0))));
     let moving = disagreement_fit
         .is_some_and(|(d, se)| d.abs() > (MOVING_SIGMAS * se).max(MOVING_MIN_PER_S));
+    let ego_fit = (!moving)
+        .then(|| robust_mean(&measured, &looming.l_ray_ego, &looming.sigma_per_s))
+        .flatten()
+        .zip(ego_sigma)
+        .map(|((e, se), sigma)| (e, se.hypot(sigma)));
+    let looming_fit = match (lidar_fit, ego_fit) {
+        (Some(lidar), Some(ego)) => Some(inverse_variance_mean(lidar, ego)),
+        (lidar, _) => lidar,
+    };
     let looming_per_s = looming_fit.map(|(l, _)| l);
     Object {
         id: 0,
@@ -123,11 +141,41 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
         bearing_deg: centroid_m[1].atan2(centroid_m[0]).to_degrees(),
         looming_per_s,
         looming_se_per_s: looming_fit.map(|(_, se)| se),
+        lidar_looming_per_s: lidar_fit.map(|(l, _)| l),
         measured_cells: measured.len(),
+        looming_from_track: false,
         time_to_contact_s: looming_per_s.filter(|&l| l > 0.0).map(|l| 1.0 / l),
         disagreement_per_s: disagreement_fit.map(|(d, _)| d),
         moving,
+        velocity_mps: None,
     }
+}
+
+/// The uncertainty of the ego prediction over `cells`: the median of their
+/// `L_ray_ego` noise (the estimated motion's share is common to all of them,
+/// so it does not average out).
+fn ego_prediction_sigma(looming: &PairLooming, cells: &[usize]) -> Option<f64> {
+    let mut sigmas: Vec<f32> = cells
+        .iter()
+        .map(|&c| looming.ray_ego_sigma_per_s[c])
+        .filter(|s| s.is_finite())
+        .collect();
+    if sigmas.is_empty() {
+        return None;
+    }
+    let mid = sigmas.len() / 2;
+    Some(f64::from(
+        *sigmas.select_nth_unstable_by(mid, f32::total_cmp).1,
+    ))
+}
+
+/// Two estimates and their standard errors combined by inverse variance.
+fn inverse_variance_mean((a, se_a): (f64, f64), (b, se_b): (f64, f64)) -> (f64, f64) {
+    let (w_a, w_b) = (1.0 / se_a.max(1e-6).powi(2), 1.0 / se_b.max(1e-6).powi(2));
+    (
+        (a * w_a + b * w_b) / (w_a + w_b),
+        (1.0 / (w_a + w_b)).sqrt(),
+    )
 }
 
 /// Whether a cell's `L_lidar` measures its surface's approach, seen at

@@ -11,11 +11,13 @@
 //! sensor and have a previous surface along their ray, with a standard error
 //! from the weighted spread.
 
+mod fuse;
 pub mod ground;
 mod measure;
 mod segment;
 mod track;
 
+pub use fuse::{FusionCounts, fuse_objects};
 pub use measure::measure_objects;
 pub use segment::segment;
 pub use track::ObjectTracker;
@@ -77,12 +79,22 @@ pub struct Object {
     /// Azimuth of the centroid (0 ahead, left positive), degrees.
     pub bearing_deg: f64,
     /// Its looming, 1/s, and standard error; `None` without a measured cell.
+    /// On an object that does not move on its own, the measurement and the
+    /// ego prediction combined; else the measurement.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub looming_per_s: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub looming_se_per_s: Option<f64>,
+    /// The measurement alone: the weighted median of `L_lidar` over its
+    /// measured cells, 1/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lidar_looming_per_s: Option<f64>,
     /// Cells the looming was measured on.
     pub measured_cells: usize,
+    /// No cell measured it: the looming is its track's, from the change of
+    /// its nearest range since the last pair.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub looming_from_track: bool,
     /// `1 / looming` when approaching, s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_to_contact_s: Option<f64>,
@@ -91,6 +103,11 @@ pub struct Object {
     pub disagreement_per_s: Option<f64>,
     /// `|D|` significant: the object moves on its own.
     pub moving: bool,
+    /// Its own velocity over the ground (ego motion removed), LiDAR frame,
+    /// m/s, from its track's centroid (smoothed); `None` before its third
+    /// pair.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_mps: Option<[f64; 3]>,
 }
 
 /// The objects of one pair.
@@ -117,6 +134,23 @@ impl PairObjects {
             cell_object,
             objects,
         }
+    }
+
+    /// The objects stage as `process` runs it on a pair: find the objects,
+    /// give them their ids and velocities (`tracker`, `dt_s` after the pair
+    /// it saw last), and feed their looming back into `looming`'s cells
+    /// ([`fuse_objects`]).
+    pub fn find_tracked_fused(
+        scan: &Scan,
+        looming: &mut PairLooming,
+        (config, threat_ttc_s): (&ObjectConfig, &[f64; 3]),
+        tracker: &mut ObjectTracker,
+        dt_s: f64,
+    ) -> (Self, FusionCounts) {
+        let mut objects = Self::find(scan, looming, config);
+        tracker.update(&mut objects, looming, dt_s);
+        let counts = fuse_objects(looming, scan, &objects, threat_ttc_s);
+        (objects, counts)
     }
 
     /// The id of the object point `index` of the scan is the surface of.

@@ -12,6 +12,8 @@ use crate::engine::PairLooming;
 
 /// Pairs a track survives without a match.
 const MAX_MISSED_PAIRS: u32 = 2;
+/// Pairs a track has been followed in before its velocity is reported.
+const MIN_PAIRS_FOR_VELOCITY: u32 = 3;
 /// Smallest gate between a predicted and a current centroid, m.
 const MIN_GATE_M: f64 = 1.0;
 /// ... plus this share of the larger object's horizontal extent.
@@ -26,6 +28,8 @@ struct Track {
     extent_m: f64,
     /// Its own velocity in the LiDAR frame (ego motion removed), m/s.
     velocity_mps: [f64; 3],
+    /// Its object's nearest range in its last pair, m.
+    nearest_range_m: f64,
 }
 
 /// Gives the objects of each pair their stable ids.
@@ -67,12 +71,20 @@ impl ObjectTracker {
         }
         let mut next_tracks = Vec::new();
         for (o, object) in objects.objects.iter_mut().enumerate() {
+            if let Some(t) = object_track[o]
+                && self.tracks[t].missed == 0
+            {
+                looming_from_range(object, self.tracks[t].nearest_range_m, dt_s);
+            }
             let track = match object_track[o] {
                 Some(t) => self.continued(t, object, ego_v, ego_w, dt_s),
                 None => self.started(object),
             };
             object.id = track.id;
             object.age_pairs = track.age_pairs;
+            // Two displacements smoothed before a velocity is told.
+            object.velocity_mps =
+                (track.age_pairs >= MIN_PAIRS_FOR_VELOCITY).then_some(track.velocity_mps);
             next_tracks.push(track);
         }
         for (t, track) in self.tracks.iter().enumerate() {
@@ -95,6 +107,7 @@ impl ObjectTracker {
             centroid_m: object.centroid_m,
             extent_m: extent(object),
             velocity_mps: [0.0; 3],
+            nearest_range_m: object.nearest_range_m,
         }
     }
 
@@ -125,9 +138,36 @@ impl ObjectTracker {
             centroid_m: object.centroid_m,
             extent_m: extent(object),
             velocity_mps,
+            nearest_range_m: object.nearest_range_m,
         }
     }
 }
+
+/// An object none of whose cells measured its looming (vegetation, whose
+/// returns have no previous surface along their rays; a pole seen by a few
+/// cells) takes it from its track instead: `-(r_now - r_before) / (dt
+/// r_now)` of its nearest range (10th percentile of its cells' ranges), the
+/// same quantity over the object, with the standard error of two such
+/// percentiles ([`NEAREST_RANGE_NOISE_M`] each).
+fn looming_from_range(object: &mut Object, range_before_m: f64, dt_s: f64) {
+    let range_m = object.nearest_range_m;
+    if object.looming_per_s.is_some()
+        || dt_s <= 0.0
+        || !(range_m.is_finite() && range_m > 0.0 && range_before_m.is_finite())
+    {
+        return;
+    }
+    let looming_per_s = -(range_m - range_before_m) / (dt_s * range_m);
+    object.looming_per_s = Some(looming_per_s);
+    object.looming_se_per_s =
+        Some(std::f64::consts::SQRT_2 * NEAREST_RANGE_NOISE_M / (dt_s * range_m));
+    object.time_to_contact_s = (looming_per_s > 0.0).then(|| 1.0 / looming_per_s);
+    object.looming_from_track = true;
+}
+
+/// Noise of an object's nearest range from pair to pair, m (its returns
+/// change with the sampling).
+const NEAREST_RANGE_NOISE_M: f64 = 0.05;
 
 /// Where a static point at `p` appears after the ego moved for `dt_s`.
 fn static_prediction(p: &[f64; 3], v: [f64; 3], w: [f64; 3], dt_s: f64) -> [f64; 3] {
@@ -159,4 +199,56 @@ fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 /// Horizontal extent (diagonal of the box), m.
 fn extent(object: &Object) -> f64 {
     (object.max_m[0] - object.min_m[0]).hypot(object.max_m[1] - object.min_m[1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn object(nearest_range_m: f64, looming_per_s: Option<f64>) -> Object {
+        Object {
+            id: 0,
+            age_pairs: 0,
+            cells: 60,
+            points: 60,
+            nearest_range_m,
+            centroid_m: [nearest_range_m, 0.0, 0.0],
+            min_m: [nearest_range_m, -0.5, -1.0],
+            max_m: [nearest_range_m + 1.0, 0.5, 0.5],
+            bearing_deg: 0.0,
+            looming_per_s,
+            looming_se_per_s: looming_per_s.map(|_| 0.01),
+            lidar_looming_per_s: looming_per_s,
+            measured_cells: if looming_per_s.is_some() { 40 } else { 0 },
+            looming_from_track: false,
+            time_to_contact_s: None,
+            disagreement_per_s: None,
+            moving: false,
+            velocity_mps: None,
+        }
+    }
+
+    #[test]
+    fn an_object_no_cell_measured_takes_its_tracks_range_rate() {
+        // 10.0 m then 9.5 m over 0.1 s: 0.5 / (0.1 x 9.5) = 0.526 1/s.
+        let mut hedge = object(9.5, None);
+        looming_from_range(&mut hedge, 10.0, 0.1);
+        let looming = hedge.looming_per_s.unwrap();
+        assert!((looming - 0.5 / 0.95).abs() < 1e-9, "{looming}");
+        assert!(hedge.looming_from_track);
+        assert!((hedge.time_to_contact_s.unwrap() - 1.0 / looming).abs() < 1e-9);
+        let se = hedge.looming_se_per_s.unwrap();
+        assert!(
+            (se - std::f64::consts::SQRT_2 * 0.05 / 0.95).abs() < 1e-9,
+            "{se}"
+        );
+        // A measured object keeps its cells' value; no time, no value.
+        let mut car = object(9.5, Some(0.2));
+        looming_from_range(&mut car, 10.0, 0.1);
+        assert_eq!(car.looming_per_s, Some(0.2));
+        assert!(!car.looming_from_track);
+        let mut first = object(9.5, None);
+        looming_from_range(&mut first, 10.0, 0.0);
+        assert_eq!(first.looming_per_s, None);
+    }
 }

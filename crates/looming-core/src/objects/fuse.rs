@@ -1,0 +1,414 @@
+//! The objects' looming fed back into their cells: the fused looming that
+//! viewers colour and near misses are built from, trusted on a solid face.
+//!
+//! Per cell the engine has only its own ray: on a real car's rear a cell is
+//! an edge or crease for the crease test (bumper, lights, window), grazing
+//! (the trunk lid), or has no previous surface along its ray (the face grew
+//! as it approached), so most of the face is masked although the object's
+//! looming is measured well from all of its cells ([`super::measure`]).
+//!
+//! An object is fed back when its value is corroborated (ten cells the
+//! engine trusts agree with it) and its cells scatter about it at most eight
+//! times their noise (else it is several faces). Its measured face is the
+//! plane of the cells that agree. Each of its cells on that face (within
+//! half a metre of the plane, at most a fifth of the object's extent; where
+//! the face's normals agree, its own normal within 60 degrees) then takes:
+//!
+//! - where it has a fused value consistent with its object's (within three
+//!   combined standard errors, at most 25 % + 0.1 1/s apart, its own
+//!   `L_lidar` too, a noise below 0.3 1/s): the two combined by inverse
+//!   variance, and its soft flags (`EDGE`, `GRAZING`, `NO_EGO`) cleared: the
+//!   cell measured what its object measures;
+//! - where it has no value of its own (`NO_PREVIOUS`, `OCCLUSION`: the face
+//!   grew, or its rim met another surface before): the object's value,
+//!   trusted (ray looming is the same along every ray meeting a plane that
+//!   moves against the sensor);
+//! - otherwise (another face of the object, a wild edge value): what the
+//!   engine gave it.
+//!
+//! An object moving across the rays (its track's velocity) has only its
+//! trusted cells combined and none filled: its flagged cells are its outline
+//! sweeping over what lies beside and behind it. Before its track tells
+//! (its first two pairs) no grazing cell is taken.
+//!
+//! The cells' own noise model can be optimistic on a real sensor: it is
+//! scaled per object by how far the cells actually scatter about the
+//! object's value (never below the model).
+
+use super::{NO_OBJECT, Object, PairObjects};
+use nalgebra::Vector3;
+
+use crate::engine::{PairLooming, ThreatLevel, mask};
+use crate::model::Scan;
+
+/// Flags a cell consistent with its object is trusted despite: its range
+/// difference is a measurement of the object's surface.
+const SOFT_FLAGS: u8 = mask::EDGE | mask::GRAZING | mask::NO_EGO;
+/// A cell within this many combined standard errors of its object's value
+/// measured the object.
+const CONSISTENT_SIGMAS: f64 = 3.0;
+/// Mean resultant length of unit normals that agree (about 25 degrees of
+/// spread).
+const AGREEING_NORMALS: f64 = 0.9;
+/// Cosine of the largest angle between a cell's normal and its face's, where
+/// normals agree (60 degrees).
+const SAME_FACE_COS: f64 = 0.5;
+/// Cosine of the incidence a flagged cell must face the sensor with to be
+/// combined, where normals can be believed (60 degrees).
+const MIN_FACING_COS: f64 = 0.5;
+/// Slower than this across the rays (m/s) an object's outline stays put.
+const MIN_ACROSS_SPEED_MPS: f64 = 0.5;
+/// A return this close to the plane of its object's measured face is on
+/// that face, m: a car's rear with its bumper, lights and the end of its
+/// lid; not its roof or sides, nor a building's other walls.
+const FACE_DEPTH_M: f64 = 0.5;
+/// ... at most this share of the object's horizontal extent.
+const FACE_DEPTH_PER_EXTENT: f64 = 0.2;
+/// An object whose cells scatter about its value more than this many times
+/// their noise model is several faces: no feedback (the braking KITTI car
+/// scatters 1-6 times, synthetic single faces 1).
+const MAX_NOISE_SCALE: f64 = 8.0;
+/// The largest difference between a consistent cell and its object: this
+/// share of the object's value ...
+const MAX_APART_FRACTION: f64 = 0.25;
+/// ... plus this, 1/s.
+const MAX_APART_PER_S: f64 = 0.1;
+/// A cell noisier than this (1/s, scaled) does not measure its object.
+const MAX_COMBINED_SIGMA_PER_S: f64 = 0.3;
+/// Fewest cells the engine trusts (mask 0) that agree with an object's value
+/// for it to be fed back.
+const MIN_CORROBORATING_CELLS: usize = 10;
+/// Fewest measured cells for an object's value to stand for cells without
+/// one of their own.
+const MIN_CELLS_TO_FILL: usize = 10;
+
+/// What the feedback changed in a pair.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FusionCounts {
+    /// Cells whose own value was combined with their object's.
+    pub combined: usize,
+    /// Cells without a value of their own that took their object's.
+    pub filled: usize,
+}
+
+/// Combine every object's looming into its cells' fused looming (see the
+/// module), update their masks and threat levels; the points' threat levels
+/// follow their cells'.
+pub fn fuse_objects(
+    looming: &mut PairLooming,
+    scan: &Scan,
+    objects: &PairObjects,
+    threat_ttc_s: &[f64; 3],
+) -> FusionCounts {
+    let mut counts = FusionCounts::default();
+    let cells_of = cells_by_object(&objects.cell_object, objects.objects.len());
+    for (object, cells) in objects.objects.iter().zip(&cells_of) {
+        let Some(value) = object_value(object) else {
+            continue;
+        };
+        let scale = noise_scale(looming, cells, value.0);
+        if scale > MAX_NOISE_SCALE {
+            // Its cells scatter far beyond their noise: several faces (a
+            // building's corner, a car seen at its corner) whose ray looming
+            // differs; one value does not stand for them.
+            continue;
+        }
+        let corroborating = cells
+            .iter()
+            .filter(|&&c| looming.mask[c] == 0 && consistent(looming, c, value, scale))
+            .count();
+        if corroborating < MIN_CORROBORATING_CELLS {
+            // No cell the engine trusts agrees: the value may be the
+            // artefact of its flagged cells (a parked car's silhouette
+            // sweeping over the background reads 4 1/s on edge cells).
+            continue;
+        }
+        let face = measured_face(looming, (scan, object), cells, value, scale);
+        // Across the rays an object's flagged cells are its outline sweeping
+        // over what lies beside and behind it (a crossing pedestrian's
+        // trailing side reads its front's looming): only what the engine
+        // trusted is combined, nothing filled.
+        let across = moves_across(object);
+        // Until its track tells (its first two pairs), a grazing cell is
+        // not taken either: near grazing a curved object's ray looming is
+        // another's (a pedestrian's side, -5 1/s beside a front of 0.85).
+        let may_take = |looming: &PairLooming, cell: usize| match across {
+            Some(false) => true,
+            Some(true) => looming.mask[cell] == 0,
+            None => looming.mask[cell] & mask::GRAZING == 0,
+        };
+        // First the cells that measured the object, then those without a
+        // valid measurement.
+        let combined: Vec<usize> = cells
+            .iter()
+            .copied()
+            .filter(|&cell| {
+                may_take(looming, cell)
+                    && on_face(looming, scan, cell, face)
+                    && combine_cell(looming, cell, value, (scale, face))
+            })
+            .collect();
+        counts.combined += combined.len();
+        let fillable: Vec<usize> = cells
+            .iter()
+            .copied()
+            .filter(|_| across != Some(true))
+            .filter(|&cell| lacks_valid_value(looming, cell) && may_take(looming, cell))
+            .filter(|&cell| on_face(looming, scan, cell, face))
+            .collect();
+        if object.measured_cells >= MIN_CELLS_TO_FILL {
+            for &cell in &fillable {
+                looming.fused[cell] = value.0 as f32;
+                looming.fused_sigma_per_s[cell] = value.1 as f32;
+                looming.mask[cell] = 0;
+            }
+            counts.filled += fillable.len();
+        } else {
+            continue;
+        }
+        for &cell in combined.iter().chain(&fillable) {
+            looming.threat[cell] = if looming.mask[cell] == 0 {
+                ThreatLevel::of(f64::from(looming.fused[cell]), threat_ttc_s)
+            } else {
+                ThreatLevel::None
+            };
+        }
+    }
+    refresh_point_threats(looming);
+    counts
+}
+
+/// The object's looming and standard error, when measured.
+fn object_value(object: &Object) -> Option<(f64, f64)> {
+    Some((object.looming_per_s?, object.looming_se_per_s?))
+}
+
+/// The cells of each object, by index in `PairObjects::objects`.
+fn cells_by_object(cell_object: &[u32], count: usize) -> Vec<Vec<usize>> {
+    let mut cells = vec![Vec::new(); count];
+    for (cell, &object) in cell_object.iter().enumerate() {
+        if object != NO_OBJECT
+            && let Some(list) = cells.get_mut(object as usize)
+        {
+            list.push(cell);
+        }
+    }
+    cells
+}
+
+/// Whether a cell holds a fused value of its own that measured its surface.
+fn has_own_value(looming: &PairLooming, cell: usize) -> bool {
+    let no_measurement = mask::EMPTY | mask::NO_PREVIOUS | mask::OCCLUSION;
+    looming.mask[cell] & no_measurement == 0
+        && looming.fused[cell].is_finite()
+        && looming.fused_sigma_per_s[cell].is_finite()
+        && looming.l_lidar[cell].is_finite()
+        && looming.sigma_per_s[cell].is_finite()
+}
+
+/// How many times the engine's noise model the object's cells scatter about
+/// `centre` (1.4826 times the median of `|fused - centre| / sigma`), at
+/// least 1.
+fn noise_scale(looming: &PairLooming, cells: &[usize], centre: f64) -> f64 {
+    let mut normalised: Vec<f64> = cells
+        .iter()
+        .filter(|&&c| has_own_value(looming, c))
+        .map(|&c| {
+            let sigma = f64::from(looming.fused_sigma_per_s[c]).max(1e-4);
+            (f64::from(looming.fused[c]) - centre).abs() / sigma
+        })
+        .collect();
+    if normalised.is_empty() {
+        return 1.0;
+    }
+    let mid = normalised.len() / 2;
+    let median = *normalised.select_nth_unstable_by(mid, f64::total_cmp).1;
+    (1.4826 * median).max(1.0)
+}
+
+/// The object's measured face: the plane of the cells consistent with its
+/// value (their mean normal, and the median distance of their returns along
+/// it).
+#[derive(Clone, Copy)]
+struct Face {
+    normal: Vector3<f64>,
+    offset_m: f64,
+    /// The measured cells' normals agree (their mean resultant length is at
+    /// least [`AGREEING_NORMALS`]): a cell's normal then tells its face.
+    /// Where they scatter (a real sensor's returns 1 cm apart with 2 cm of
+    /// range noise: on KITTI's braking car the fitted normals wander by tens
+    /// of degrees), only the distance from the plane does.
+    normals_agree: bool,
+    /// How far from the plane a return is still on the face, m.
+    depth_m: f64,
+}
+
+impl Face {
+    /// How far the cell's return lies from the face's plane, m.
+    fn distance_m(&self, looming: &PairLooming, scan: &Scan, cell: usize) -> Option<f64> {
+        let p = super::ground::cell_point(looming, scan, cell)?;
+        Some((self.normal.dot(&Vector3::from(p)) - self.offset_m).abs())
+    }
+}
+
+/// The face of the cells consistent with the object's value; `None` with
+/// fewer than [`MIN_CELLS_TO_FILL`].
+fn measured_face(
+    looming: &PairLooming,
+    (scan, object): (&Scan, &Object),
+    cells: &[usize],
+    value: (f64, f64),
+    scale: f64,
+) -> Option<Face> {
+    let consistent_cells: Vec<(usize, Vector3<f64>)> = cells
+        .iter()
+        .copied()
+        .filter(|&c| has_own_value(looming, c) && consistent(looming, c, value, scale))
+        .filter_map(|c| {
+            let normal = Vector3::from(looming.normal[c].map(f64::from));
+            (normal.norm_squared() > 0.5).then_some((c, normal))
+        })
+        .collect();
+    if consistent_cells.len() < MIN_CELLS_TO_FILL {
+        return None;
+    }
+    let sum = consistent_cells
+        .iter()
+        .map(|(_, n)| n)
+        .sum::<Vector3<f64>>();
+    let resultant_length = sum.norm() / consistent_cells.len() as f64;
+    let normal = sum.try_normalize(1e-9)?;
+    let mut offsets: Vec<f64> = consistent_cells
+        .iter()
+        .filter_map(|&(c, _)| super::ground::cell_point(looming, scan, c))
+        .map(|p| normal.dot(&Vector3::from(p)))
+        .collect();
+    if offsets.is_empty() {
+        return None;
+    }
+    let mid = offsets.len() / 2;
+    let offset_m = *offsets.select_nth_unstable_by(mid, f64::total_cmp).1;
+    Some(Face {
+        normal,
+        offset_m,
+        normals_agree: resultant_length >= AGREEING_NORMALS,
+        depth_m: face_depth_m(object),
+    })
+}
+
+/// Whether the cell's fused value agrees with its object's value:
+/// within [`CONSISTENT_SIGMAS`] combined standard errors, and however noisy
+/// the cell, within [`MAX_APART_FRACTION`] of the value plus
+/// [`MAX_APART_PER_S`] (beyond, it is another face or a mixed return: the
+/// side of a crossing pedestrian reads half its front's looming).
+fn consistent(looming: &PairLooming, cell: usize, (value, se): (f64, f64), scale: f64) -> bool {
+    let sigma = f64::from(looming.fused_sigma_per_s[cell]) * scale;
+    let apart = (f64::from(looming.fused[cell]) - value).abs();
+    apart <= CONSISTENT_SIGMAS * sigma.hypot(se)
+        && apart <= MAX_APART_FRACTION * value.abs() + MAX_APART_PER_S
+}
+
+/// Whether the cell's own measurement (`L_lidar`; its fused value may come
+/// from its neighbours or the ego prediction) is within the largest
+/// difference a face allows of its object's value: the trailing side of a
+/// pedestrian crossing at 3 m reads 0.7 1/s (truth -1.7) beside a front of
+/// 1.3, and an edge cell's fused value there is its neighbours'.
+fn measurement_agrees(looming: &PairLooming, cell: usize, value: f64) -> bool {
+    let apart = (f64::from(looming.l_lidar[cell]) - value).abs();
+    apart <= MAX_APART_FRACTION * value.abs() + MAX_APART_PER_S
+}
+
+/// Whether a cell the engine flagged may still have measured its object:
+/// where the face's normals agree (a sensor whose fitted normals can be
+/// believed), only if it faces the sensor ([`MIN_FACING_COS`], as the cells
+/// an object's looming is measured on): on a curved object (a pedestrian) the
+/// ray looming of a cell seen obliquely is another (the trailing side of a
+/// crossing pedestrian: -1.7 1/s beside a front of 1.3). Where they
+/// scatter, a cell's incidence says nothing.
+fn masked_cell_may_measure(looming: &PairLooming, cell: usize, face: Option<Face>) -> bool {
+    looming.mask[cell] == 0
+        || !face.is_some_and(|f| f.normals_agree)
+        || f64::from(looming.incidence_cos[cell]) >= MIN_FACING_COS
+}
+
+/// Combine a cell's own value with its object's when they agree (see the
+/// module); whether it did.
+fn combine_cell(
+    looming: &mut PairLooming,
+    cell: usize,
+    (value, se): (f64, f64),
+    (scale, face): (f64, Option<Face>),
+) -> bool {
+    if !has_own_value(looming, cell)
+        || !consistent(looming, cell, (value, se), scale)
+        || !measurement_agrees(looming, cell, value)
+        || !masked_cell_may_measure(looming, cell, face)
+    {
+        return false;
+    }
+    let sigma = f64::from(looming.fused_sigma_per_s[cell]) * scale;
+    if sigma > MAX_COMBINED_SIGMA_PER_S {
+        // Agreement within a noise this large says nothing.
+        return false;
+    }
+    let (w_cell, w_object) = (1.0 / sigma.max(1e-6).powi(2), 1.0 / se.max(1e-6).powi(2));
+    let fused = (f64::from(looming.fused[cell]) * w_cell + value * w_object) / (w_cell + w_object);
+    looming.fused[cell] = fused as f32;
+    looming.fused_sigma_per_s[cell] = (1.0 / (w_cell + w_object)).sqrt() as f32;
+    looming.mask[cell] &= !SOFT_FLAGS;
+    true
+}
+
+/// A return of the object without a valid measurement of its own: no
+/// previous surface along its ray, or another one there. (A cell whose own
+/// value its object contradicts keeps it: another face of the object, an
+/// oblique wall whose ray looming is truly larger, is not the measured
+/// face's.)
+fn lacks_valid_value(looming: &PairLooming, cell: usize) -> bool {
+    let m = looming.mask[cell];
+    m & mask::EMPTY == 0 && m != 0 && !has_own_value(looming, cell)
+}
+
+/// Whether the object moves across the sensor's rays: its track's velocity
+/// over the ground, less its part along the ray to its centroid, at least
+/// [`MIN_ACROSS_SPEED_MPS`]; `None` before its track tells a velocity.
+fn moves_across(object: &Object) -> Option<bool> {
+    let v = Vector3::from(object.velocity_mps?);
+    let ray = Vector3::from(object.centroid_m).try_normalize(1e-9)?;
+    Some((v - ray * v.dot(&ray)).norm() >= MIN_ACROSS_SPEED_MPS)
+}
+
+/// The depth of an object's face: [`FACE_DEPTH_M`], and on a small object
+/// [`FACE_DEPTH_PER_EXTENT`] of its horizontal extent (a pedestrian is half
+/// a metre deep: its sides are not its front).
+fn face_depth_m(object: &Object) -> f64 {
+    let extent_m = (object.max_m[0] - object.min_m[0]).hypot(object.max_m[1] - object.min_m[1]);
+    (FACE_DEPTH_PER_EXTENT * extent_m).min(FACE_DEPTH_M)
+}
+
+/// Whether the cell's return lies on the object's measured face (within
+/// [`FACE_DEPTH_M`] of its plane): its ray looming is then about the face's
+/// (on a plane moving against the sensor it is the same along every ray).
+fn on_face(looming: &PairLooming, scan: &Scan, cell: usize, face: Option<Face>) -> bool {
+    let Some(face) = face else {
+        return false;
+    };
+    let normal = Vector3::from(looming.normal[cell].map(f64::from));
+    let turned_away = face.normals_agree
+        && normal.norm_squared() > 0.5
+        && normal.dot(&face.normal) < SAME_FACE_COS;
+    !turned_away
+        && face
+            .distance_m(looming, scan, cell)
+            .is_some_and(|d| d <= face.depth_m)
+}
+
+/// Each point's threat level from its cell's, when the point is that cell's
+/// surface.
+fn refresh_point_threats(looming: &mut PairLooming) {
+    for (point, &cell) in looming.image.point_surface.iter().enumerate() {
+        if let Some(threat) = looming.threat.get(cell as usize) {
+            looming.point_threat[point] = *threat;
+        }
+    }
+}
