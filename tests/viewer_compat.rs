@@ -223,6 +223,17 @@ fn layout_follows_the_logs_own_lidar_frame() {
     let json = read_json(&layout);
     let three_d = &json["configById"]["3D!looming"];
     assert_eq!(three_d["followTf"], "lidar");
+    // A LiDAR topic named that the log lacks is refused, annotated or not.
+    let unknown = looming(&[
+        "layout",
+        annotated.to_str().unwrap(),
+        "-o",
+        dir.join("unknown.json").to_str().unwrap(),
+        "--lidar-topic",
+        "/nope",
+    ]);
+    assert_eq!(unknown.status.code(), Some(2), "{}", stderr(&unknown));
+    assert!(stderr(&unknown).contains("/nope"), "{}", stderr(&unknown));
     assert_eq!(
         three_d["topics"]["/looming/points"]["colorMode"],
         "rgba-fields"
@@ -312,13 +323,25 @@ fn process_writes_a_clip_per_near_miss_with_every_channel_of_its_window() {
         "the run record"
     );
     assert!(cut.metadata.iter().any(|m| m.name == "looming.synth"));
-    // Existing clips are kept unless --force.
-    let run = looming_process(
+    // Existing clips are kept unless --force: the same output name in
+    // another folder names the same clip.
+    let before = std::fs::read(&clip).unwrap();
+    std::fs::create_dir_all(dir.join("other")).unwrap();
+    let again = dir.join("other/cut-in-annotated.mcap");
+    let refused = looming_process(
         &sample("cut-in.mcap"),
-        &dir.join("again.mcap"),
+        &again,
         &["--clips", clips.to_str().unwrap(), "0.3"],
     );
-    assert!(run.status.success(), "{}", stderr(&run));
+    assert!(!refused.status.success(), "{}", stderr(&refused));
+    assert!(stderr(&refused).contains("exists"), "{}", stderr(&refused));
+    assert_eq!(std::fs::read(&clip).unwrap(), before, "the clip is kept");
+    let forced = looming_process(
+        &sample("cut-in.mcap"),
+        &again,
+        &["--clips", clips.to_str().unwrap(), "0.3", "--force"],
+    );
+    assert!(forced.status.success(), "{}", stderr(&forced));
     let bad = looming_process(
         &sample("cut-in.mcap"),
         &dir.join("bad.mcap"),

@@ -202,7 +202,7 @@ pub(crate) fn looming_cloud(
                 .f32(at(&looming.confidence))
                 .u8(looming.point_threat[index] as u8)
                 .u8(cell.map_or(crate::engine::mask::EMPTY, |c| looming.mask[c]))
-                .u32(objects.object_of_point(looming, index).unwrap_or(0));
+                .u32(cell.and_then(|c| objects.object_of_cell(c)).unwrap_or(0));
         }
     }
     cloud(scan, layout, out.data)

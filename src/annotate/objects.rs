@@ -45,13 +45,8 @@ pub fn object_threat(object: &Object, ttc_s: &[f64; 3]) -> ThreatLevel {
         (Some(l), Some(se)) => l > 2.0 * se,
         _ => false,
     };
-    if !significant {
-        return ThreatLevel::None;
-    }
-    match object.time_to_contact_s {
-        Some(t) if t <= ttc_s[2] => ThreatLevel::High,
-        Some(t) if t <= ttc_s[1] => ThreatLevel::Medium,
-        Some(t) if t <= ttc_s[0] => ThreatLevel::Low,
+    match object.looming_per_s {
+        Some(looming_per_s) if significant => ThreatLevel::of(looming_per_s, ttc_s),
         _ => ThreatLevel::None,
     }
 }

@@ -253,14 +253,8 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
 }
 
 fn layout(args: LayoutArgs) -> Result<(), Failure> {
-    use looming::output::{OutputError, check_overwrite, same_file};
-    let usage = |error: OutputError| Failure::with_code(error, 2);
-    if same_file(&args.log, &args.output) {
-        return Err(usage(OutputError::SameAsInput {
-            path: args.output.clone(),
-        }));
-    }
-    check_overwrite(&args.output, args.force).map_err(usage)?;
+    looming::output::check_output_path(&args.log, &args.output, args.force)
+        .map_err(|error| Failure::with_code(error, 2))?;
     let target = looming::commands::layout::target_of(&args.log, args.lidar_topic.as_deref());
     let target = target.map_err(|error| {
         let code = match error {

@@ -7,10 +7,11 @@
 //! of the log, its metadata records (the run record among them), and each
 //! message whose log time falls in its window. A latched channel
 //! (`/tf_static`, or a channel recorded with `transient_local` durability or
-//! `latching: 1`) publishes once, usually at the start of the log: its last
-//! message before the window is written again at the window's start, so that
-//! a viewer has the transforms; that copy is the only record whose log time
-//! differs from the log's.
+//! `latching: 1`) publishes once, usually at the start of the log, often as
+//! several messages (one per static broadcaster): its messages before the
+//! window (the last [`MAX_LATCHED_PER_CHANNEL`]) are written again at the
+//! window's start, so that a viewer has every transform; those copies are
+//! the only records whose log time differs from the log's.
 
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
@@ -26,13 +27,12 @@ pub enum ClipError {
     Input(#[from] InputError),
     #[error(transparent)]
     Output(#[from] OutputError),
-    #[error("{path}: cannot create the clips folder: {source}")]
-    Folder {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
 }
+
+/// Messages of one latched channel carried into a clip, at most (the newest):
+/// a log that publishes a "latched" channel continuously must not grow the
+/// cutter's memory.
+const MAX_LATCHED_PER_CHANNEL: usize = 64;
 
 /// One clip written.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -70,10 +70,6 @@ pub fn write_clips(
     if events.is_empty() {
         return Ok(Vec::new());
     }
-    std::fs::create_dir_all(dir).map_err(|source| ClipError::Folder {
-        path: dir.to_path_buf(),
-        source,
-    })?;
     let margin_ns = (margin_s.max(0.0) * 1e9).round() as u64;
     let mut pending: Vec<ClipFile> = events
         .iter()
@@ -85,6 +81,11 @@ pub fn write_clips(
             messages: 0,
         })
         .collect();
+    // Refused before any work when a clip exists (the writers create the
+    // folder).
+    for clip in &pending {
+        crate::output::check_overwrite(&clip.path, force)?;
+    }
     // Opened in order of their start.
     pending.sort_by_key(|clip| (clip.start_log_time_ns, clip.event_id));
     pending.reverse();
@@ -144,8 +145,9 @@ struct Cutter<'a> {
     open: Vec<OpenClip>,
     done: Vec<ClipFile>,
     metadata: Vec<mcap::records::Metadata>,
-    /// The last message of each latched channel so far.
-    latched: BTreeMap<u16, InputMessage>,
+    /// The messages of each latched channel so far (the newest
+    /// [`MAX_LATCHED_PER_CHANNEL`]).
+    latched: BTreeMap<u16, std::collections::VecDeque<InputMessage>>,
     latched_channels: Vec<u16>,
     failure: Option<ClipError>,
 }
@@ -187,7 +189,11 @@ impl Cutter<'_> {
             }
         }
         if self.latched_channels.contains(&message.channel_id) {
-            self.latched.insert(message.channel_id, message);
+            let kept = self.latched.entry(message.channel_id).or_default();
+            if kept.len() == MAX_LATCHED_PER_CHANNEL {
+                kept.pop_front();
+            }
+            kept.push_back(message);
         }
         let all_started = self.pending.is_empty();
         Ok(if all_started && self.open.is_empty() {
@@ -203,7 +209,7 @@ impl Cutter<'_> {
             writer.write_metadata(metadata)?;
         }
         let mut clip = OpenClip { writer, file };
-        for message in self.latched.values() {
+        for message in self.latched.values().flatten() {
             let mut carried = message.clone();
             carried.log_time_ns = clip.file.start_log_time_ns;
             carried.publish_time_ns = clip.file.start_log_time_ns;

@@ -66,6 +66,16 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
         ..TopicOverrides::default()
     };
     let selected = select(catalog, &overrides);
+    let topic_error = |source| LayoutError::Topic {
+        path: log.to_path_buf(),
+        source,
+    };
+    // A topic the user named must exist, annotated log or not; without one
+    // an annotated log needs none (its pairs name the frame).
+    let selected = match selected {
+        Err(source) if lidar_topic.is_some() => return Err(topic_error(source)),
+        other => other,
+    };
     let lidar = selected.as_ref().ok().and_then(|s| s.lidar.clone());
     if let Some(pairs) = catalog.channels.values().find(|c| c.topic == PAIRS_TOPIC) {
         let frame = first_message(&input, pairs.id)?.and_then(|data| {
@@ -81,10 +91,7 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
         }
     }
     let lidar = selected
-        .map_err(|source| LayoutError::Topic {
-            path: log.to_path_buf(),
-            source,
-        })?
+        .map_err(topic_error)?
         .lidar
         .expect("select always chooses a LiDAR topic");
     let no_frame = || LayoutError::NoFrame {

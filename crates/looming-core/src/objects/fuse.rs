@@ -35,7 +35,8 @@
 //! scaled per object by how far the cells actually scatter about the
 //! object's value (never below the model).
 
-use super::{NO_OBJECT, Object, PairObjects};
+use super::measure::inverse_variance_mean;
+use super::{Object, PairObjects, cells_by_object};
 use nalgebra::Vector3;
 
 use crate::engine::{PairLooming, ThreatLevel, mask};
@@ -149,23 +150,22 @@ pub fn fuse_objects(
             })
             .collect();
         counts.combined += combined.len();
+        let may_fill = across != Some(true) && object.measured_cells >= MIN_CELLS_TO_FILL;
         let fillable: Vec<usize> = cells
             .iter()
             .copied()
-            .filter(|_| across != Some(true))
+            .filter(|_| may_fill)
             .filter(|&cell| lacks_valid_value(looming, cell) && may_take(looming, cell))
             .filter(|&cell| on_face(looming, scan, cell, face))
             .collect();
-        if object.measured_cells >= MIN_CELLS_TO_FILL {
-            for &cell in &fillable {
-                looming.fused[cell] = value.0 as f32;
-                looming.fused_sigma_per_s[cell] = value.1 as f32;
-                looming.mask[cell] = 0;
-            }
-            counts.filled += fillable.len();
-        } else {
-            continue;
+        for &cell in &fillable {
+            looming.fused[cell] = value.0 as f32;
+            looming.fused_sigma_per_s[cell] = value.1 as f32;
+            looming.mask[cell] = 0;
         }
+        counts.filled += fillable.len();
+        // (Every changed cell's threat follows its new value: combined ones
+        // too when nothing is filled.)
         for &cell in combined.iter().chain(&fillable) {
             looming.threat[cell] = if looming.mask[cell] == 0 {
                 ThreatLevel::of(f64::from(looming.fused[cell]), threat_ttc_s)
@@ -181,19 +181,6 @@ pub fn fuse_objects(
 /// The object's looming and standard error, when measured.
 fn object_value(object: &Object) -> Option<(f64, f64)> {
     Some((object.looming_per_s?, object.looming_se_per_s?))
-}
-
-/// The cells of each object, by index in `PairObjects::objects`.
-fn cells_by_object(cell_object: &[u32], count: usize) -> Vec<Vec<usize>> {
-    let mut cells = vec![Vec::new(); count];
-    for (cell, &object) in cell_object.iter().enumerate() {
-        if object != NO_OBJECT
-            && let Some(list) = cells.get_mut(object as usize)
-        {
-            list.push(cell);
-        }
-    }
-    cells
 }
 
 /// Whether a cell holds a fused value of its own that measured its surface.
@@ -351,10 +338,10 @@ fn combine_cell(
         // Agreement within a noise this large says nothing.
         return false;
     }
-    let (w_cell, w_object) = (1.0 / sigma.max(1e-6).powi(2), 1.0 / se.max(1e-6).powi(2));
-    let fused = (f64::from(looming.fused[cell]) * w_cell + value * w_object) / (w_cell + w_object);
+    let (fused, fused_sigma) =
+        inverse_variance_mean((f64::from(looming.fused[cell]), sigma), (value, se));
     looming.fused[cell] = fused as f32;
-    looming.fused_sigma_per_s[cell] = (1.0 / (w_cell + w_object)).sqrt() as f32;
+    looming.fused_sigma_per_s[cell] = fused_sigma as f32;
     looming.mask[cell] &= !SOFT_FLAGS;
     true
 }

@@ -21,7 +21,7 @@
 //! joins the measurement by inverse variance.
 
 use super::ground::cell_point;
-use super::{NO_OBJECT, Object};
+use super::{NO_OBJECT, Object, cells_by_object};
 use crate::engine::{PairLooming, mask};
 use crate::model::Scan;
 
@@ -46,12 +46,7 @@ pub fn measure_objects(scan: &Scan, looming: &PairLooming, cell_object: &[u32]) 
         .map(|&o| o as usize + 1)
         .max()
         .unwrap_or(0);
-    let mut cells: Vec<Vec<usize>> = vec![Vec::new(); count];
-    for (cell, &object) in cell_object.iter().enumerate() {
-        if object != NO_OBJECT {
-            cells[object as usize].push(cell);
-        }
-    }
+    let cells = cells_by_object(cell_object, count);
     let mut points = vec![0usize; count];
     for &cell in &looming.image.point_surface {
         if cell != crate::engine::NO_POINT
@@ -170,7 +165,7 @@ fn ego_prediction_sigma(looming: &PairLooming, cells: &[usize]) -> Option<f64> {
 }
 
 /// Two estimates and their standard errors combined by inverse variance.
-fn inverse_variance_mean((a, se_a): (f64, f64), (b, se_b): (f64, f64)) -> (f64, f64) {
+pub(super) fn inverse_variance_mean((a, se_a): (f64, f64), (b, se_b): (f64, f64)) -> (f64, f64) {
     let (w_a, w_b) = (1.0 / se_a.max(1e-6).powi(2), 1.0 / se_b.max(1e-6).powi(2));
     (
         (a * w_a + b * w_b) / (w_a + w_b),

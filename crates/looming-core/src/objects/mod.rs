@@ -110,6 +110,20 @@ pub struct Object {
     pub velocity_mps: Option<[f64; 3]>,
 }
 
+/// The cells of each object (`count` of them), by index in
+/// `PairObjects::objects`, from the per-cell labels.
+pub(crate) fn cells_by_object(cell_object: &[u32], count: usize) -> Vec<Vec<usize>> {
+    let mut cells = vec![Vec::new(); count];
+    for (cell, &object) in cell_object.iter().enumerate() {
+        if object != NO_OBJECT
+            && let Some(list) = cells.get_mut(object as usize)
+        {
+            list.push(cell);
+        }
+    }
+    cells
+}
+
 /// The objects of one pair.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PairObjects {
@@ -155,7 +169,11 @@ impl PairObjects {
 
     /// The id of the object point `index` of the scan is the surface of.
     pub fn object_of_point(&self, looming: &PairLooming, index: usize) -> Option<u32> {
-        let cell = looming.image.surface_cell(index)?;
+        self.object_of_cell(looming.image.surface_cell(index)?)
+    }
+
+    /// The id of the object range-image cell `cell` belongs to.
+    pub fn object_of_cell(&self, cell: usize) -> Option<u32> {
         let object = *self.cell_object.get(cell)?;
         self.objects.get(object as usize).map(|o| o.id)
     }
