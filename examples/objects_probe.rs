@@ -25,6 +25,7 @@ fn main() {
     let mut static_abs_d = Vec::new();
     let mut per_track: BTreeMap<u32, (usize, usize)> = BTreeMap::new();
     let (mut objects_total, mut ms) = (0usize, 0.0f64);
+    let (mut from_track, mut assumed_static) = (0usize, 0usize);
     looming::pipeline::replay(
         std::path::Path::new(&path),
         &looming::pipeline::ScanOptions::default(),
@@ -50,7 +51,27 @@ fn main() {
                 }
                 seen += 1;
                 let measured = object.looming_per_s.is_some();
+                if !measured && std::env::var_os("PROBE_WHY").is_some() {
+                    let cells: Vec<usize> = (0..objects.cell_object.len())
+                        .filter(|&c| objects.objects.get(objects.cell_object[c] as usize).is_some_and(|o| o.id == object.id))
+                        .collect();
+                    let mut bits = [0usize; 16];
+                    for &c in &cells {
+                        for (b, n) in bits.iter_mut().enumerate() {
+                            *n += usize::from(result.mask[c] & (1 << b) != 0);
+                        }
+                    }
+                    let facing = cells.iter().filter(|&&c| result.incidence_cos[c].abs() >= 0.5).count();
+                    let ego = cells.iter().filter(|&&c| result.l_ray_ego[c].is_finite()).count();
+                    println!(
+                        "  no looming: id {} age {} pts {} cells {} r {:.1} brg {:.0} ext {:.1}x{:.1}x{:.1} facing {facing} ego {ego} bits {:?}",
+                        object.id, object.age_pairs, object.points, object.cells, object.nearest_range_m, object.bearing_deg,
+                        object.max_m[0]-object.min_m[0], object.max_m[1]-object.min_m[1], object.max_m[2]-object.min_m[2], &bits[..8]
+                    );
+                }
                 with_looming += usize::from(measured);
+                from_track += usize::from(object.looming_from_track);
+                assumed_static += usize::from(object.looming_assumed_static);
                 let entry = per_track.entry(object.id).or_default();
                 entry.0 += 1;
                 entry.1 += usize::from(measured);
@@ -78,6 +99,9 @@ fn main() {
         per_track.len(),
         100.0 * tracks_ok as f64 / per_track.len().max(1) as f64,
         median(&mut lengths)
+    );
+    println!(
+        "  of the sightings: {from_track} from their track's range rate, {assumed_static} assumed static (ego motion alone)"
     );
     if static_abs_d.is_empty() {
         println!("no D (no ego motion)");

@@ -110,7 +110,11 @@ fn object_entity(scan: &Scan, object: &Object, level: ThreatLevel) -> SceneEntit
         b: f64::from(b) / 255.0,
         a: alpha,
     };
+    // "if static": a value from the ego motion alone, not measured.
     let label = match object.time_to_contact_s {
+        Some(ttc) if object.looming_assumed_static => {
+            format!("#{} TTC {ttc:.1} s if static", object.id)
+        }
         Some(ttc) => format!("#{} TTC {ttc:.1} s", object.id),
         None => format!("#{}", object.id),
     };

@@ -22,6 +22,7 @@
 
 use super::ground::cell_point;
 use super::{NO_OBJECT, Object, cells_by_object};
+use crate::engine::egomotion::EgoEstimate;
 use crate::engine::{PairLooming, mask};
 use crate::model::Scan;
 
@@ -119,10 +120,21 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
         .flatten()
         .zip(ego_sigma)
         .map(|((e, se), sigma)| (e, se.hypot(sigma)));
-    let looming_fit = match (lidar_fit, ego_fit) {
+    let measured_fit = match (lidar_fit, ego_fit) {
         (Some(lidar), Some(ego)) => Some(inverse_variance_mean(lidar, ego)),
         (lidar, _) => lidar,
     };
+    let static_fit = measured_fit
+        .is_none()
+        .then(|| {
+            let velocity = looming
+                .availability
+                .ego_velocity
+                .then_some(looming.velocity_mps);
+            looming_if_static(velocity.flatten(), looming.ego_estimate.as_ref(), &returns)
+        })
+        .flatten();
+    let looming_fit = measured_fit.or(static_fit);
     let looming_per_s = looming_fit.map(|(l, _)| l);
     Object {
         id: 0,
@@ -139,11 +151,58 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
         lidar_looming_per_s: lidar_fit.map(|(l, _)| l),
         measured_cells: measured.len(),
         looming_from_track: false,
+        looming_assumed_static: static_fit.is_some(),
         time_to_contact_s: looming_per_s.filter(|&l| l > 0.0).map(|l| 1.0 / l),
         disagreement_per_s: disagreement_fit.map(|(d, _)| d),
         moving,
         velocity_mps: None,
     }
+}
+
+/// Share of an object's returns, nearest first, its looming if static is
+/// taken over (the part a collision would meet first).
+const NEAREST_SHARE: f64 = 0.2;
+
+/// The looming the object would have if it stood still, from the ego motion
+/// alone: the median over its nearest returns of `(v . p) / |p|^2` (a static
+/// point's range changes by `-v . p/|p|`; rotation does not change a range),
+/// with the uncertainty of the velocity along those rays (a measured
+/// velocity's 1 % and, for one estimated from the scans, its covariance).
+/// `None` without ego motion. What an object none of whose cells measured
+/// its approach, seen for the first time (no track range yet), is given,
+/// flagged as assumed.
+fn looming_if_static(
+    velocity_mps: Option<[f64; 3]>,
+    estimate: Option<&EgoEstimate>,
+    returns: &[[f64; 3]],
+) -> Option<(f64, f64)> {
+    let velocity = velocity_mps?;
+    let mut by_range: Vec<(f64, [f64; 3])> = returns
+        .iter()
+        .map(|p| ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt(), *p))
+        .filter(|(r, _)| *r > 0.0 && r.is_finite())
+        .collect();
+    if by_range.is_empty() {
+        return None;
+    }
+    by_range.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let nearest = ((by_range.len() as f64 * NEAREST_SHARE).ceil() as usize).max(1);
+    let mut values: Vec<(f64, [f64; 3])> = by_range[..nearest]
+        .iter()
+        .map(|&(r, p)| {
+            let dot = velocity[0] * p[0] + velocity[1] * p[1] + velocity[2] * p[2];
+            (dot / (r * r), p)
+        })
+        .collect();
+    values.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (looming_per_s, at) = values[values.len() / 2];
+    let model = 0.01 * looming_per_s.abs() + 0.005;
+    let sigma = estimate.map_or(model, |estimate| {
+        let point = nalgebra::Vector3::from(at);
+        let ray = point.normalize();
+        model.hypot(estimate.ray_looming_sigma_per_s(point, ray, 1.0))
+    });
+    Some((looming_per_s, sigma))
 }
 
 /// The uncertainty of the ego prediction over `cells`: the median of their
@@ -230,6 +289,39 @@ fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_object_assumed_static_looms_by_the_ego_velocity_along_its_nearest_rays() {
+        // A wall 10 m ahead, 2 m wide, approached at 5 m/s: its nearest
+        // returns (straight ahead) loom at v / r = 0.5 1/s.
+        let wall: Vec<[f64; 3]> = (0..=40)
+            .map(|k| [10.0, -1.0 + 0.05 * f64::from(k), 0.0])
+            .collect();
+        let (looming, sigma) = looming_if_static(Some([5.0, 0.0, 0.0]), None, &wall).unwrap();
+        assert!((looming - 0.5).abs() < 0.002, "{looming}");
+        // A measured velocity: 1 % of the value and 0.005 1/s.
+        assert!((sigma - 0.01).abs() < 1e-3, "{sigma}");
+        // An estimated one adds its uncertainty along the ray: 0.1 m/s at
+        // 10 m is 0.01 1/s.
+        let mut covariance = [[0.0; 6]; 6];
+        for k in 3..6 {
+            covariance[k][k] = 0.01;
+        }
+        let estimate = EgoEstimate {
+            velocity_mps: [5.0, 0.0, 0.0],
+            angular_velocity_radps: [0.0; 3],
+            inlier_cells: 1000,
+            residual_m: 0.02,
+            velocity_estimated: true,
+            rotation_estimated: true,
+            covariance,
+        };
+        let (_, sigma) = looming_if_static(Some([5.0, 0.0, 0.0]), Some(&estimate), &wall).unwrap();
+        assert!((sigma - 0.01f64.hypot(0.01)).abs() < 1e-3, "{sigma}");
+        // Rotation changes no range; no ego motion, no value.
+        assert_eq!(looming_if_static(None, None, &wall), None);
+        assert_eq!(looming_if_static(Some([5.0, 0.0, 0.0]), None, &[]), None);
+    }
 
     #[test]
     fn the_weighted_median_ignores_a_few_wild_cells() {

@@ -95,6 +95,11 @@ pub struct Object {
     /// its nearest range since the last pair.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub looming_from_track: bool,
+    /// Neither its cells nor its track measured it (its first pair): the
+    /// looming is what it would be were the object static, from the ego
+    /// motion alone; replaced by its track's range rate from its next pair.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub looming_assumed_static: bool,
     /// `1 / looming` when approaching, s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_to_contact_s: Option<f64>,

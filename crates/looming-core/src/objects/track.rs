@@ -151,7 +151,8 @@ impl ObjectTracker {
 /// percentiles ([`NEAREST_RANGE_NOISE_M`] each).
 fn looming_from_range(object: &mut Object, range_before_m: f64, dt_s: f64) {
     let range_m = object.nearest_range_m;
-    if object.looming_per_s.is_some()
+    // A looming assumed from the ego motion gives way to a measured one.
+    if (object.looming_per_s.is_some() && !object.looming_assumed_static)
         || dt_s <= 0.0
         || !(range_m.is_finite() && range_m > 0.0 && range_before_m.is_finite())
     {
@@ -163,6 +164,7 @@ fn looming_from_range(object: &mut Object, range_before_m: f64, dt_s: f64) {
         Some(std::f64::consts::SQRT_2 * NEAREST_RANGE_NOISE_M / (dt_s * range_m));
     object.time_to_contact_s = (looming_per_s > 0.0).then(|| 1.0 / looming_per_s);
     object.looming_from_track = true;
+    object.looming_assumed_static = false;
 }
 
 /// Noise of an object's nearest range from pair to pair, m (its returns
@@ -221,6 +223,7 @@ mod tests {
             lidar_looming_per_s: looming_per_s,
             measured_cells: if looming_per_s.is_some() { 40 } else { 0 },
             looming_from_track: false,
+            looming_assumed_static: false,
             time_to_contact_s: None,
             disagreement_per_s: None,
             moving: false,
