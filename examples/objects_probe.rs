@@ -52,22 +52,7 @@ fn main() {
                 seen += 1;
                 let measured = object.looming_per_s.is_some();
                 if !measured && std::env::var_os("PROBE_WHY").is_some() {
-                    let cells: Vec<usize> = (0..objects.cell_object.len())
-                        .filter(|&c| objects.objects.get(objects.cell_object[c] as usize).is_some_and(|o| o.id == object.id))
-                        .collect();
-                    let mut bits = [0usize; 16];
-                    for &c in &cells {
-                        for (b, n) in bits.iter_mut().enumerate() {
-                            *n += usize::from(result.mask[c] & (1 << b) != 0);
-                        }
-                    }
-                    let facing = cells.iter().filter(|&&c| result.incidence_cos[c].abs() >= 0.5).count();
-                    let ego = cells.iter().filter(|&&c| result.l_ray_ego[c].is_finite()).count();
-                    println!(
-                        "  no looming: id {} age {} pts {} cells {} r {:.1} brg {:.0} ext {:.1}x{:.1}x{:.1} facing {facing} ego {ego} bits {:?}",
-                        object.id, object.age_pairs, object.points, object.cells, object.nearest_range_m, object.bearing_deg,
-                        object.max_m[0]-object.min_m[0], object.max_m[1]-object.min_m[1], object.max_m[2]-object.min_m[2], &bits[..8]
-                    );
+                    print_why(&objects, &result, object);
                 }
                 with_looming += usize::from(measured);
                 from_track += usize::from(object.looming_from_track);
@@ -103,13 +88,62 @@ fn main() {
     println!(
         "  of the sightings: {from_track} from their track's range rate, {assumed_static} assumed static (ego motion alone)"
     );
+    print_static_d(&mut static_abs_d);
+}
+
+/// The median |D| of the sightings not flagged moving.
+fn print_static_d(static_abs_d: &mut [f64]) {
     if static_abs_d.is_empty() {
         println!("no D (no ego motion)");
     } else {
         println!(
             "objects not flagged moving: median |D| {:.4} 1/s over {} sightings",
-            median(&mut static_abs_d.clone()),
+            median(static_abs_d),
             static_abs_d.len()
         );
     }
+}
+
+/// Why an object has no looming: its age, size, place, and how many of its
+/// cells face the sensor, have an ego prediction and carry each mask bit.
+fn print_why(
+    objects: &PairObjects,
+    result: &looming::engine::PairLooming,
+    object: &looming::objects::Object,
+) {
+    let cells: Vec<usize> = (0..objects.cell_object.len())
+        .filter(|&c| {
+            objects
+                .objects
+                .get(objects.cell_object[c] as usize)
+                .is_some_and(|o| o.id == object.id)
+        })
+        .collect();
+    let mut bits = [0usize; 16];
+    for &c in &cells {
+        for (b, n) in bits.iter_mut().enumerate() {
+            *n += usize::from(result.mask[c] & (1 << b) != 0);
+        }
+    }
+    let facing = cells
+        .iter()
+        .filter(|&&c| result.incidence_cos[c].abs() >= 0.5)
+        .count();
+    let ego = cells
+        .iter()
+        .filter(|&&c| result.l_ray_ego[c].is_finite())
+        .count();
+    println!(
+        "  no looming: id {} age {} pts {} cells {} r {:.1} brg {:.0} ext {:.1}x{:.1}x{:.1} facing {facing} ego {ego} bits {:?}",
+        object.id,
+        object.age_pairs,
+        object.points,
+        object.cells,
+        object.nearest_range_m,
+        object.bearing_deg,
+        object.max_m[0] - object.min_m[0],
+        object.max_m[1] - object.min_m[1],
+        object.max_m[2] - object.min_m[2],
+        &bits[..8]
+    );
 }

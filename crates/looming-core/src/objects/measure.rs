@@ -70,26 +70,7 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
         .iter()
         .filter_map(|&c| cell_point(looming, scan, c))
         .collect();
-    let mut ranges: Vec<f64> = returns
-        .iter()
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-        .collect();
-    ranges.sort_by(f64::total_cmp);
-    let nearest_range_m = ranges
-        .get((ranges.len().saturating_sub(1)) / 10)
-        .copied()
-        .unwrap_or(f64::NAN);
-    let n = returns.len().max(1) as f64;
-    let mut centroid_m = [0.0; 3];
-    let mut min_m = [f64::INFINITY; 3];
-    let mut max_m = [f64::NEG_INFINITY; 3];
-    for p in &returns {
-        for k in 0..3 {
-            centroid_m[k] += p[k] / n;
-            min_m[k] = min_m[k].min(p[k]);
-            max_m[k] = max_m[k].max(p[k]);
-        }
-    }
+    let (nearest_range_m, centroid_m, min_m, max_m) = geometry_of(&returns);
     let mut measured: Vec<usize> = cells
         .iter()
         .copied()
@@ -157,6 +138,32 @@ fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -
         moving,
         velocity_mps: None,
     }
+}
+
+/// Where an object's `returns` are: the 10th percentile of their ranges,
+/// their mean and their axis-aligned extent (smallest and largest x, y, z).
+fn geometry_of(returns: &[[f64; 3]]) -> (f64, [f64; 3], [f64; 3], [f64; 3]) {
+    let mut ranges: Vec<f64> = returns
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .collect();
+    ranges.sort_by(f64::total_cmp);
+    let nearest_range_m = ranges
+        .get((ranges.len().saturating_sub(1)) / 10)
+        .copied()
+        .unwrap_or(f64::NAN);
+    let n = returns.len().max(1) as f64;
+    let mut centroid_m = [0.0; 3];
+    let mut min_m = [f64::INFINITY; 3];
+    let mut max_m = [f64::NEG_INFINITY; 3];
+    for p in returns {
+        for k in 0..3 {
+            centroid_m[k] += p[k] / n;
+            min_m[k] = min_m[k].min(p[k]);
+            max_m[k] = max_m[k].max(p[k]);
+        }
+    }
+    (nearest_range_m, centroid_m, min_m, max_m)
 }
 
 /// Share of an object's returns, nearest first, its looming if static is
@@ -304,8 +311,8 @@ mod tests {
         // An estimated one adds its uncertainty along the ray: 0.1 m/s at
         // 10 m is 0.01 1/s.
         let mut covariance = [[0.0; 6]; 6];
-        for k in 3..6 {
-            covariance[k][k] = 0.01;
+        for (k, row) in covariance.iter_mut().enumerate().skip(3) {
+            row[k] = 0.01;
         }
         let estimate = EgoEstimate {
             velocity_mps: [5.0, 0.0, 0.0],
