@@ -190,6 +190,123 @@ pub fn select(catalog: &Catalog, overrides: &TopicOverrides) -> Result<TopicSele
     })
 }
 
+/// `--lidar-topic all`: every LiDAR topic of the log.
+pub const ALL_LIDARS: &str = "all";
+
+/// One selection per LiDAR sensor, for `process`: every LiDAR topic of the
+/// log (by default, or `--lidar-topic all`) or those `--lidar-topic` lists
+/// (comma-separated), each with the IMU, velocity and tf channels the
+/// sensors share. A log with one LiDAR gets the one selection [`select`]
+/// gives.
+pub fn select_sensors(
+    catalog: &Catalog,
+    overrides: &TopicOverrides,
+) -> Result<Vec<TopicSelection>, TopicError> {
+    let all = candidates(catalog);
+    let lidars: Vec<SelectedChannel> = match overrides.lidar.as_deref() {
+        None | Some(ALL_LIDARS) => all
+            .iter()
+            .filter(|c| c.role == Role::Lidar)
+            .cloned()
+            .collect(),
+        Some(list) => list
+            .split(',')
+            .map(str::trim)
+            .filter(|topic| !topic.is_empty())
+            .map(|topic| {
+                choose(catalog, &all, Role::Lidar, Some(topic)).map(|c| c.into_iter().collect())
+            })
+            .collect::<Result<Vec<Vec<SelectedChannel>>, _>>()?
+            .into_iter()
+            .flatten()
+            .collect(),
+    };
+    if lidars.is_empty() {
+        // The single selection's error, which lists the log's channels.
+        return select(catalog, overrides).map(|one| vec![one]);
+    }
+    let imu = choose(catalog, &all, Role::Imu, overrides.imu.as_deref())?;
+    let velocity = choose(catalog, &all, Role::Velocity, overrides.velocity.as_deref())?;
+    let tf: Vec<SelectedChannel> = all
+        .iter()
+        .filter(|c| matches!(c.role, Role::Tf | Role::TfStatic))
+        .cloned()
+        .collect();
+    let mut seen = std::collections::BTreeSet::new();
+    Ok(lidars
+        .into_iter()
+        // A topic listed twice is one sensor.
+        .filter(|lidar| seen.insert(lidar.channel_id))
+        .map(|lidar| TopicSelection {
+            lidar: Some(lidar),
+            imu: imu.clone(),
+            velocity: velocity.clone(),
+            tf: tf.clone(),
+        })
+        .collect())
+}
+
+/// Last topic segments that say "a point cloud", not which sensor.
+const CLOUD_SEGMENTS: [&str; 8] = [
+    "points",
+    "points_raw",
+    "pointcloud",
+    "pointcloud_raw",
+    "point_cloud",
+    "cloud",
+    "velodyne_points",
+    "lidar",
+];
+
+/// The name of the sensor publishing `topic`, for the names of its output
+/// channels (`/looming/<sensor>/points`, docs/channels.md): the topic's
+/// segments joined by `_`, without a last segment that only says "points"
+/// (`/lidar_front/points` -> `lidar_front`,
+/// `/sensing/lidar/top/pointcloud_raw` -> `sensing_lidar_top`), every
+/// character outside `[A-Za-z0-9_-]` made `_`.
+pub fn sensor_name(topic: &str) -> String {
+    let segments: Vec<&str> = topic.split('/').filter(|s| !s.is_empty()).collect();
+    let kept = match segments.split_last() {
+        Some((last, rest)) if !rest.is_empty() && CLOUD_SEGMENTS.contains(last) => rest,
+        _ => &segments[..],
+    };
+    let name: String = kept
+        .join("_")
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if name.is_empty() {
+        "lidar".into()
+    } else {
+        name
+    }
+}
+
+/// The sensor names of `topics`, made unique (`_2`, `_3`, ... after a name
+/// already taken).
+pub fn sensor_names(topics: &[&str]) -> Vec<String> {
+    let mut taken = std::collections::BTreeSet::new();
+    topics
+        .iter()
+        .map(|topic| {
+            let base = sensor_name(topic);
+            let mut name = base.clone();
+            let mut k = 2;
+            while !taken.insert(name.clone()) {
+                name = format!("{base}_{k}");
+                k += 1;
+            }
+            name
+        })
+        .collect()
+}
+
 fn choose(
     catalog: &Catalog,
     all: &[SelectedChannel],
@@ -265,4 +382,27 @@ fn list_all_channels(catalog: &Catalog) -> String {
         );
     }
     text
+}
+
+#[cfg(test)]
+mod sensor_name_tests {
+    use super::*;
+
+    #[test]
+    fn a_sensor_is_named_by_its_topic_without_the_points_segment() {
+        assert_eq!(sensor_name("/lidar_front/points"), "lidar_front");
+        assert_eq!(
+            sensor_name("/sensing/lidar/top/pointcloud_raw"),
+            "sensing_lidar_top"
+        );
+        assert_eq!(sensor_name("/velodyne_points"), "velodyne_points");
+        assert_eq!(sensor_name("/points"), "points");
+        assert_eq!(sensor_name("/ouster/points"), "ouster");
+        assert_eq!(sensor_name("/a b/c.d/points"), "a_b_c_d");
+        assert_eq!(sensor_name("/"), "lidar");
+        assert_eq!(
+            sensor_names(&["/a/points", "/a/cloud", "/b/points"]),
+            ["a", "a_2", "b"]
+        );
+    }
 }

@@ -475,28 +475,25 @@ fn output_paths_are_guarded() {
 fn ambiguous_and_unknown_topics_list_the_candidates() {
     let dir = scratch("topics");
     let good = default_drive();
-    let contents = read_all(&good);
     // Add a second LiDAR channel carrying the same scans.
-    let mut log = looming::testkit::LogBuilder::new(Layout::indexed(), "ros2");
-    copy_channels(&contents, &mut log);
-    log.channel(9, 1, "/sensing/lidar/rear", "cdr");
-    for m in &contents.messages {
-        log.message(
-            m.channel_id,
-            m.sequence,
-            m.log_time,
-            m.publish_time,
-            &m.data,
-        );
-        if m.channel_id == 1 {
-            log.message(9, m.sequence, m.log_time, m.publish_time, &m.data);
-        }
-    }
+    let two = common::with_channel_copy(&good, "/sensing/lidar/points", "/sensing/lidar/rear");
     let in_path = dir.join("in.mcap");
-    write(&in_path, &log.finish());
+    write(&in_path, &two);
     let out = dir.join("out.mcap");
-    let ambiguous = looming_process(&in_path, &out, &[]);
-    assert_eq!(ambiguous.status.code(), Some(2));
+    // Several LiDARs are each annotated (tests/multi_lidar.rs); `render`,
+    // which draws one sensor, lists them and asks for one.
+    let both = looming_process(&in_path, &out, &[]);
+    assert!(both.status.success(), "{}", stderr(&both));
+    let picture = dir.join("pair.png");
+    let ambiguous = common::looming(&[
+        "render",
+        in_path.to_str().unwrap(),
+        "-o",
+        picture.to_str().unwrap(),
+        "--frame",
+        "1",
+    ]);
+    assert_eq!(ambiguous.status.code(), Some(2), "{}", stderr(&ambiguous));
     let text = stderr(&ambiguous);
     assert!(
         text.contains("/sensing/lidar/points") && text.contains("/sensing/lidar/rear"),
@@ -506,10 +503,14 @@ fn ambiguous_and_unknown_topics_list_the_candidates() {
         text.contains("--lidar-topic") && text.contains("sensor_msgs/msg/PointCloud2"),
         "{text}"
     );
-    let unknown = looming_process(&in_path, &out, &["--lidar-topic", "/nope"]);
+    let unknown = looming_process(&in_path, &out, &["--lidar-topic", "/nope", "--force"]);
     assert_eq!(unknown.status.code(), Some(2));
     assert!(stderr(&unknown).contains("/sensing/lidar/rear"));
-    let chosen = looming_process(&in_path, &out, &["--lidar-topic", "/sensing/lidar/rear"]);
+    let chosen = looming_process(
+        &in_path,
+        &out,
+        &["--lidar-topic", "/sensing/lidar/rear", "--force"],
+    );
     assert!(chosen.status.success(), "{}", stderr(&chosen));
 }
 

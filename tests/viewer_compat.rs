@@ -381,7 +381,7 @@ fn batch_links_a_clip_per_near_miss_and_writes_a_layout() {
         csv.lines()
             .next()
             .unwrap()
-            .ends_with(",clip,object_id,lateral_offset_m"),
+            .ends_with(",clip,object_id,lateral_offset_m,sensors"),
         "{csv}"
     );
     assert!(

@@ -501,8 +501,18 @@ pub fn event_summary(event: &NearMissEvent) -> String {
         .peak
         .ego_speed_mps
         .map_or(String::new(), |v| format!(", ego {v:.1} m/s"));
+    // Several LiDARs: who saw it, and whose view the figures are.
+    let seen_by = match &event.sensor {
+        Some(sensor) if !event.sensors.is_empty() => {
+            format!(
+                ", seen by {} (figures of {sensor})",
+                event.sensors.join(", ")
+            )
+        }
+        _ => String::new(),
+    };
     format!(
-        "near miss #{}: min time to contact {:.2} s (looming {:.2} 1/s), {} at {:.1} m, {} object{}, {:.1} s long ({} scans)",
+        "near miss #{}: min time to contact {:.2} s (looming {:.2} 1/s), {} at {:.1} m, {} object{}, {:.1} s long ({} scans){seen_by}",
         event.id,
         event.min_time_to_contact_s,
         event.peak_looming_per_s,

@@ -116,6 +116,90 @@ pub fn channel_specs() -> Vec<OwnChannelSpec> {
     CHANNELS.iter().map(|c| c.spec()).collect()
 }
 
+/// The channels of the near-miss events: one set per log however many
+/// LiDARs it has (events, log, near misses).
+const EVENT_CHANNELS: [Channel; 3] = [Channel::Events, Channel::Log, Channel::NearMisses];
+
+/// On a log with several LiDARs, the channel specs of `sensor`, in
+/// registration order: every channel but the events', under the sensor's
+/// name ([`topics::sensor_topic`]).
+pub fn sensor_channel_specs(sensor: &str) -> Vec<OwnChannelSpec> {
+    CHANNELS
+        .iter()
+        .filter(|c| !EVENT_CHANNELS.contains(c))
+        .map(|c| {
+            let mut spec = c.spec();
+            spec.topic = topics::sensor_topic(sensor, &spec.topic);
+            spec
+        })
+        .collect()
+}
+
+/// The specs of the log's event channels (with several LiDARs), in
+/// registration order.
+pub fn event_channel_specs() -> Vec<OwnChannelSpec> {
+    EVENT_CHANNELS.iter().map(|c| c.spec()).collect()
+}
+
+/// The full id list [`Annotator::new`] takes, from a sensor's ids
+/// ([`sensor_channel_specs`] order) and the log's event ids
+/// ([`event_channel_specs`] order).
+pub fn sensor_channel_ids(sensor_ids: &[u16], event_ids: &[u16]) -> Vec<u16> {
+    let (mut sensor_ids, mut event_ids) = (sensor_ids.iter(), event_ids.iter());
+    CHANNELS
+        .iter()
+        .map(|c| {
+            let next = if EVENT_CHANNELS.contains(c) {
+                event_ids.next()
+            } else {
+                sensor_ids.next()
+            };
+            next.copied().unwrap_or(u16::MAX)
+        })
+        .collect()
+}
+
+/// Writes near-miss events on the log's event channels.
+#[derive(Debug, Clone)]
+pub struct EventWriter {
+    channel_ids: [u16; 3],
+    sequences: [u32; 3],
+}
+
+impl EventWriter {
+    /// `channel_ids`: the ids of [`event_channel_specs`], same order.
+    pub fn new(channel_ids: &[u16]) -> Self {
+        let mut ids = [u16::MAX; 3];
+        for (id, given) in ids.iter_mut().zip(channel_ids) {
+            *id = *given;
+        }
+        Self {
+            channel_ids: ids,
+            sequences: [0; 3],
+        }
+    }
+
+    /// An event's messages: on the events, the log and the near-miss
+    /// (`foxglove.Event`) channels, at the log time of its first hot scan.
+    pub fn messages(&mut self, event: &NearMissEvent) -> [OwnMessage; 3] {
+        let json = serde_json::to_vec(event).expect("events always serialise");
+        let line = foxglove::event_log(event).encode_to_vec();
+        let span = foxglove::near_miss_event(event).encode_to_vec();
+        let mut slot = 0;
+        [json, line, span].map(|data| {
+            let message = OwnMessage {
+                channel_id: self.channel_ids[slot],
+                sequence: self.sequences[slot],
+                log_time_ns: event.start_log_time_ns,
+                data,
+            };
+            self.sequences[slot] += 1;
+            slot += 1;
+            message
+        })
+    }
+}
+
 /// An encoded message for one of our channels.
 #[derive(Debug, Clone)]
 pub struct OwnMessage {
@@ -156,6 +240,29 @@ pub struct AnnotateStats {
     pub event_min_cells: Option<usize>,
 }
 
+impl AnnotateStats {
+    /// Add another sensor's figures to these (the smallest event cluster of
+    /// both; `events` is the log's, set by whoever merges them).
+    pub fn absorb(&mut self, other: &AnnotateStats) {
+        self.pairs_annotated += other.pairs_annotated;
+        self.pairs_without_image += other.pairs_without_image;
+        self.pairs_lidar_only += other.pairs_lidar_only;
+        self.pairs_motion_estimated += other.pairs_motion_estimated;
+        self.cells_fused_with_object += other.cells_fused_with_object;
+        self.cells_filled_from_object += other.cells_filled_from_object;
+        self.points_written += other.points_written;
+        self.disagreement_points_written += other.disagreement_points_written;
+        self.threat_points_written += other.threat_points_written;
+        self.events += other.events;
+        self.images_not_encoded += other.images_not_encoded;
+        self.engine_s += other.engine_s;
+        self.event_min_cells = match (self.event_min_cells, other.event_min_cells) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+    }
+}
+
 /// Runs the engine and the event detector over a stream of pairs.
 pub struct Annotator {
     config: AnnotateConfig,
@@ -167,6 +274,10 @@ pub struct Annotator {
     stats: AnnotateStats,
     quality: Option<PairQuality>,
     tracker: ObjectTracker,
+    /// Events are kept, not written: on a log with several LiDARs the
+    /// sensors' events are merged into one list at the end.
+    hold_events: bool,
+    event_writer: EventWriter,
 }
 
 impl Annotator {
@@ -184,7 +295,15 @@ impl Annotator {
             stats: AnnotateStats::default(),
             quality: None,
             tracker: ObjectTracker::default(),
+            hold_events: false,
+            event_writer: EventWriter::new(&EVENT_CHANNELS.map(|c| ids[c as usize])),
         }
+    }
+
+    /// Keep the events (see [`Annotator::events`]) instead of writing them.
+    pub fn hold_events(mut self) -> Self {
+        self.hold_events = true;
+        self
     }
 
     pub fn stats(&self) -> &AnnotateStats {
@@ -337,12 +456,9 @@ impl Annotator {
     /// An event goes out at the log time of its first hot scan, on the
     /// events, the log and the near-miss (`foxglove.Event`) channels.
     fn push_event(&mut self, event: NearMissEvent, out: &mut Vec<OwnMessage>) {
-        let json = serde_json::to_vec(&event).expect("events always serialise");
-        let line = foxglove::event_log(&event).encode_to_vec();
-        let span = foxglove::near_miss_event(&event).encode_to_vec();
-        self.push(Channel::Events, event.start_log_time_ns, json, out);
-        self.push(Channel::Log, event.start_log_time_ns, line, out);
-        self.push(Channel::NearMisses, event.start_log_time_ns, span, out);
+        if !self.hold_events {
+            out.extend(self.event_writer.messages(&event));
+        }
         self.stats.events += 1;
         self.events.push(event);
     }

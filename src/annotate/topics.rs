@@ -18,6 +18,27 @@ pub const NEAR_MISSES_TOPIC: &str = "/looming/near_misses";
 pub const OBJECTS_TOPIC: &str = "/looming/objects";
 pub const OBJECT_LIST_TOPIC: &str = "/looming/object_list";
 
+/// The topic of `sensor`'s copy of our channel `topic`, on a log with
+/// several LiDARs: `/looming/points` of sensor `lidar_left` is
+/// `/looming/lidar_left/points` (docs/channels.md, "Several LiDARs").
+pub fn sensor_topic(sensor: &str, topic: &str) -> String {
+    let rest = topic.strip_prefix(OUR_TOPIC_PREFIX).unwrap_or(topic);
+    format!("{OUR_TOPIC_PREFIX}{sensor}/{rest}")
+}
+
+/// The sensor of a pairs topic: `Some(None)` for `/looming/pairs` (a log
+/// with one LiDAR), `Some(Some(sensor))` for `/looming/<sensor>/pairs`,
+/// `None` for any other topic.
+pub fn sensor_of_pairs_topic(topic: &str) -> Option<Option<String>> {
+    if topic == PAIRS_TOPIC {
+        return Some(None);
+    }
+    let sensor = topic
+        .strip_prefix(OUR_TOPIC_PREFIX)?
+        .strip_suffix("/pairs")?;
+    (!sensor.is_empty() && !sensor.contains('/')).then(|| Some(sensor.to_owned()))
+}
+
 /// A channel written by `looming process` (never an input of it).
 pub fn is_ours(topic: &str) -> bool {
     topic.starts_with(OUR_TOPIC_PREFIX)
@@ -47,5 +68,20 @@ mod tests {
         }
         assert!(!is_ours("/sensing/lidar/points"));
         assert!(!is_ours("/truth/points"));
+        assert_eq!(
+            sensor_topic("lidar_left", POINTS_TOPIC),
+            "/looming/lidar_left/points"
+        );
+        assert_eq!(
+            sensor_topic("roof", IMAGE_FUSED_TOPIC),
+            "/looming/roof/image/fused"
+        );
+        assert_eq!(sensor_of_pairs_topic(PAIRS_TOPIC), Some(None));
+        assert_eq!(
+            sensor_of_pairs_topic("/looming/roof/pairs"),
+            Some(Some("roof".into()))
+        );
+        assert_eq!(sensor_of_pairs_topic("/looming/roof/points"), None);
+        assert_eq!(sensor_of_pairs_topic("/looming/a/b/pairs"), None);
     }
 }

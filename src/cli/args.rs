@@ -316,9 +316,12 @@ pub(crate) struct ScanArgs {
     /// decompression of every chunk).
     #[arg(long)]
     pub(crate) verify: bool,
-    /// LiDAR topic (sensor_msgs/PointCloud2 or foxglove.PointCloud); auto-detected
-    /// when the log has exactly one.
-    #[arg(long, value_name = "TOPIC")]
+    /// LiDAR topic (sensor_msgs/PointCloud2 or foxglove.PointCloud). `process`
+    /// and `batch` annotate every LiDAR of a log by default, or those given
+    /// here: one topic, a comma-separated list, or `all` (docs/channels.md,
+    /// "Several LiDARs"); `eval` and `render` take one, auto-detected when the
+    /// log has exactly one.
+    #[arg(long, value_name = "TOPIC[,TOPIC...]|all")]
     pub(crate) lidar_topic: Option<String>,
     /// IMU topic (sensor_msgs/Imu); auto-detected when the log has exactly one.
     #[arg(long, value_name = "TOPIC")]

@@ -88,10 +88,19 @@ fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
     let topic = |c: &Option<looming::topics::SelectedChannel>| {
         c.as_ref().map_or("none".to_string(), |c| c.topic.clone())
     };
+    let lidars = if s.sensors.is_empty() {
+        topic(&s.topics.lidar)
+    } else {
+        s.sensors
+            .iter()
+            .map(|sensor| sensor.topic.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     let _ = writeln!(
         out,
         "  topics        lidar {}, imu {}, velocity {}, tf {}",
-        topic(&s.topics.lidar),
+        lidars,
         topic(&s.topics.imu),
         topic(&s.topics.velocity),
         s.topics.tf.len()
@@ -108,8 +117,13 @@ fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
     );
 }
 
-/// How the LiDAR's rings and times were found.
+/// How the LiDAR's rings and times were found; with several LiDARs, a
+/// line per sensor instead.
 fn layout_lines(out: &mut String, s: &RunSummary) {
+    if !s.sensors.is_empty() {
+        sensor_lines(out, s);
+        return;
+    }
     if let (Some(layout), Some(lidar)) = (&s.pairing.layout, &s.topics.lidar) {
         let _ = writeln!(out, "  layout        {}: {layout}", lidar.topic);
         if s.pairing.layout_kinds.len() > 1 {
@@ -132,6 +146,36 @@ fn layout_lines(out: &mut String, s: &RunSummary) {
                 s.pairing.ring_fields_dropped
             );
         }
+    }
+}
+
+/// Each sensor of a log with several LiDARs: its channels, layout, pairs
+/// and where it sits (the frame its events were merged in).
+fn sensor_lines(out: &mut String, s: &RunSummary) {
+    let _ = writeln!(
+        out,
+        "  sensors       {} LiDARs, each on /looming/<sensor>/..., one list of near misses",
+        s.sensors.len()
+    );
+    for sensor in &s.sensors {
+        let layout = sensor
+            .pairing
+            .layout
+            .as_ref()
+            .map_or("no layout".to_string(), ToString::to_string);
+        let frame = sensor.vehicle_frame.as_ref().map_or_else(
+            || "no transform to the vehicle: its events stand alone".to_string(),
+            |frame| format!("in vehicle frame {frame}"),
+        );
+        let _ = writeln!(
+            out,
+            "    {:<14} {}: {layout}; {} pairs, {} annotated, engine {:.1} s; {frame}",
+            sensor.name,
+            sensor.topic,
+            sensor.pairs_written,
+            sensor.annotation.pairs_annotated,
+            sensor.annotation.engine_s
+        );
     }
 }
 

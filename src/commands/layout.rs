@@ -18,11 +18,12 @@ use crate::annotate::topics::{
     DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
     OBJECTS_TOPIC, PAIRS_TOPIC, POINTS_TOPIC, THREAT_TOPIC, THREAT_ZONES_TOPIC,
 };
+use crate::annotate::topics::{sensor_of_pairs_topic, sensor_topic};
 use crate::decode::{DecodeLimits, decode};
 use crate::input::{InputError, InputFile, InputOptions, InputRecord};
 use crate::model::Decoded;
 use crate::output::AtomicFile;
-use crate::topics::{TopicError, TopicOverrides, select};
+use crate::topics::{TopicError, TopicOverrides, select, select_sensors, sensor_names};
 
 #[derive(Debug, thiserror::Error)]
 pub enum LayoutError {
@@ -53,6 +54,19 @@ pub struct LayoutTarget {
     pub lidar_topic: Option<String>,
     /// Where the frame was read: `/looming/pairs` or the LiDAR topic.
     pub frame_from: String,
+    /// On a log with several LiDARs, each sensor's name (its channels
+    /// `/looming/<sensor>/...`) and input topic; the 3D panel follows the
+    /// first sensor's frame and shows them all (Foxglove places the others
+    /// through `/tf_static`). Empty with one LiDAR.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<LayoutSensor>,
+}
+
+/// One sensor of a layout for several LiDARs.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct LayoutSensor {
+    pub name: String,
+    pub lidar_topic: Option<String>,
 }
 
 /// The LiDAR frame and topic of `log`: from its first `/looming/pairs`
@@ -76,6 +90,11 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
         Err(source) if lidar_topic.is_some() => return Err(topic_error(source)),
         other => other,
     };
+    if lidar_topic.is_none()
+        && let Some(target) = several_sensors_target(log, &input)?
+    {
+        return Ok(target);
+    }
     let lidar = selected.as_ref().ok().and_then(|s| s.lidar.clone());
     if let Some(pairs) = catalog.channels.values().find(|c| c.topic == PAIRS_TOPIC) {
         let frame = first_message(&input, pairs.id)?.and_then(|data| {
@@ -87,6 +106,7 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
                 frame_id,
                 lidar_topic: lidar.map(|l| l.topic),
                 frame_from: PAIRS_TOPIC.into(),
+                sensors: Vec::new(),
             });
         }
     }
@@ -105,9 +125,65 @@ pub fn target_of(log: &Path, lidar_topic: Option<&str>) -> Result<LayoutTarget, 
             frame_id: scan.frame_id,
             frame_from: lidar.topic.clone(),
             lidar_topic: Some(lidar.topic),
+            sensors: Vec::new(),
         }),
         _ => Err(no_frame()),
     }
+}
+
+/// The target of a log annotated for several LiDARs (`/looming/<sensor>/pairs`
+/// channels): the first sensor's frame, every sensor with its input topic.
+/// `None` for any other log.
+fn several_sensors_target(
+    log: &Path,
+    input: &InputFile,
+) -> Result<Option<LayoutTarget>, LayoutError> {
+    let catalog = input.catalog();
+    let mut pairs: Vec<(String, u16, String)> = catalog
+        .channels
+        .values()
+        .filter_map(|c| Some((sensor_of_pairs_topic(&c.topic)??, c.id, c.topic.clone())))
+        .collect();
+    if pairs.is_empty() {
+        return Ok(None);
+    }
+    pairs.sort_by_key(|(_, id, _)| *id);
+    // The input topics, by the names `process` gave them.
+    let inputs: Vec<String> = select_sensors(catalog, &TopicOverrides::default())
+        .map(|sensors| {
+            sensors
+                .into_iter()
+                .filter_map(|s| s.lidar.map(|l| l.topic))
+                .collect()
+        })
+        .unwrap_or_default();
+    let names = sensor_names(&inputs.iter().map(String::as_str).collect::<Vec<_>>());
+    let (_, first_id, first_topic) = &pairs[0];
+    let frame_id = first_message(input, *first_id)?
+        .and_then(|data| {
+            let pair: Value = serde_json::from_slice(&data).ok()?;
+            Some(pair.pointer("/current/frame_id")?.as_str()?.to_owned())
+        })
+        .ok_or_else(|| LayoutError::NoFrame {
+            path: log.to_path_buf(),
+            topic: first_topic.clone(),
+        })?;
+    let sensors = pairs
+        .iter()
+        .map(|(name, _, _)| LayoutSensor {
+            name: name.clone(),
+            lidar_topic: names
+                .iter()
+                .position(|n| n == name)
+                .map(|k| inputs[k].clone()),
+        })
+        .collect();
+    Ok(Some(LayoutTarget {
+        frame_id,
+        lidar_topic: None,
+        frame_from: first_topic.clone(),
+        sensors,
+    }))
 }
 
 /// The payload of the first message (in log time) on `channel_id`; reading
@@ -130,6 +206,51 @@ fn first_message(input: &InputFile, channel_id: u16) -> Result<Option<Vec<u8>>, 
 
 /// The layout, as Foxglove's and Lichtblick's "Import layout" read it.
 pub fn layout_json(target: &LayoutTarget) -> Value {
+    let mut layout = one_sensor_layout(target);
+    if !target.sensors.is_empty() {
+        several_sensors_images(&mut layout, &target.sensors);
+    }
+    layout
+}
+
+/// With several LiDARs, the image row holds each sensor's fused range
+/// image (the disagreement images stay in the log: six panels would leave
+/// each too small to read).
+fn several_sensors_images(layout: &mut Value, sensors: &[LayoutSensor]) {
+    let config = layout["configById"]
+        .as_object_mut()
+        .expect("the layout has its panels' configs");
+    config.remove("Image!looming-fused");
+    config.remove("Image!looming-disagreement");
+    let ids: Vec<String> = sensors
+        .iter()
+        .map(|sensor| {
+            let id = format!("Image!looming-fused-{}", sensor.name);
+            config.insert(
+                id.clone(),
+                image_panel(&sensor_topic(&sensor.name, IMAGE_FUSED_TOPIC)),
+            );
+            id
+        })
+        .collect();
+    layout["layout"]["second"] = image_column(&ids);
+}
+
+/// Panels `ids` stacked in equal rows (a binary tree of splits).
+fn image_column(ids: &[String]) -> Value {
+    match ids {
+        [] => Value::Null,
+        [one] => json!(one),
+        [first, rest @ ..] => json!({
+            "direction": "column",
+            "first": first,
+            "second": image_column(rest),
+            "splitPercentage": 100.0 / ids.len() as f64
+        }),
+    }
+}
+
+fn one_sensor_layout(target: &LayoutTarget) -> Value {
     json!({
         "configById": {
             "3D!looming": three_d_panel(target),
@@ -192,19 +313,41 @@ fn cloud(point_size: f64, visible: bool) -> Value {
     })
 }
 
-fn three_d_panel(target: &LayoutTarget) -> Value {
-    let mut topics = serde_json::Map::new();
-    if let Some(lidar) = &target.lidar_topic {
+/// The 3D panel's topics of one sensor (`sensor` `None`: the channels of a
+/// log with one LiDAR).
+fn sensor_topics(
+    topics: &mut serde_json::Map<String, Value>,
+    sensor: Option<&str>,
+    lidar_topic: Option<&String>,
+) {
+    if let Some(lidar) = lidar_topic {
         // Our clouds lie exactly on the input cloud: it would hide them.
         topics.insert(lidar.clone(), json!({ "visible": false }));
     }
-    topics.insert(POINTS_TOPIC.into(), cloud(2.5, true));
+    let ours = |topic: &str| sensor.map_or(topic.to_owned(), |s| sensor_topic(s, topic));
+    topics.insert(ours(POINTS_TOPIC), cloud(2.5, true));
     // Moving objects, drawn larger over the fused cloud.
-    topics.insert(DISAGREEMENT_TOPIC.into(), cloud(5.0, true));
-    topics.insert(THREAT_TOPIC.into(), cloud(4.0, false));
-    topics.insert(THREAT_ZONES_TOPIC.into(), json!({ "visible": true }));
+    topics.insert(ours(DISAGREEMENT_TOPIC), cloud(5.0, true));
+    topics.insert(ours(THREAT_TOPIC), cloud(4.0, false));
+    // One sensor's threat zones are enough: every sensor's are the same
+    // spheres about a different origin.
+    topics.insert(ours(THREAT_ZONES_TOPIC), json!({ "visible": true }));
     // A box per object, coloured by threat, labelled with its id and TTC.
-    topics.insert(OBJECTS_TOPIC.into(), json!({ "visible": true }));
+    topics.insert(ours(OBJECTS_TOPIC), json!({ "visible": true }));
+}
+
+fn three_d_panel(target: &LayoutTarget) -> Value {
+    let mut topics = serde_json::Map::new();
+    if target.sensors.is_empty() {
+        sensor_topics(&mut topics, None, target.lidar_topic.as_ref());
+    }
+    for (k, sensor) in target.sensors.iter().enumerate() {
+        sensor_topics(&mut topics, Some(&sensor.name), sensor.lidar_topic.as_ref());
+        if k > 0 {
+            let zones = sensor_topic(&sensor.name, THREAT_ZONES_TOPIC);
+            topics.insert(zones, json!({ "visible": false }));
+        }
+    }
     json!({
         "cameraState": {
             "distance": 40,
@@ -265,12 +408,12 @@ mod tests {
             frame_id: frame.into(),
             lidar_topic: Some("/velodyne_points".into()),
             frame_from: PAIRS_TOPIC.into(),
+            sensors: Vec::new(),
         }
     }
 
-    #[test]
-    fn every_panel_in_the_tree_has_its_config_and_the_3d_panel_follows_the_frame() {
-        let layout = layout_json(&target("velo_link"));
+    /// Every leaf of the panel tree has its config and every config a leaf.
+    fn assert_panels_match(layout: &Value) {
         let config = layout["configById"].as_object().unwrap();
         let mut leaves = Vec::new();
         fn collect<'a>(node: &'a Value, leaves: &mut Vec<&'a str>) {
@@ -287,6 +430,46 @@ mod tests {
         let mut ids: Vec<&str> = config.keys().map(String::as_str).collect();
         ids.sort_unstable();
         assert_eq!(leaves, ids);
+    }
+
+    #[test]
+    fn a_layout_for_three_lidars_shows_each_sensors_channels_and_fused_image() {
+        let mut three = target("lidar_roof");
+        three.lidar_topic = None;
+        three.sensors = ["lidar_roof", "lidar_left", "lidar_right"]
+            .iter()
+            .map(|name| LayoutSensor {
+                name: (*name).into(),
+                lidar_topic: Some(format!("/{name}/points")),
+            })
+            .collect();
+        let layout = layout_json(&three);
+        assert_panels_match(&layout);
+        let config = layout["configById"].as_object().unwrap();
+        let topics = &config["3D!looming"]["topics"];
+        for name in ["lidar_roof", "lidar_left", "lidar_right"] {
+            assert_eq!(topics[format!("/{name}/points")]["visible"], false);
+            assert_eq!(topics[format!("/looming/{name}/points")]["visible"], true);
+            assert_eq!(topics[format!("/looming/{name}/objects")]["visible"], true);
+            assert_eq!(
+                config[&format!("Image!looming-fused-{name}")]["imageMode"]["imageTopic"],
+                format!("/looming/{name}/image/fused")
+            );
+        }
+        // One set of threat zones; the log's one list of events.
+        assert_eq!(topics["/looming/lidar_left/threat_zones"]["visible"], false);
+        assert_eq!(config["3D!looming"]["followTf"], "lidar_roof");
+        assert_eq!(
+            config["RawMessages!looming-events"]["topicPath"],
+            EVENTS_TOPIC
+        );
+    }
+
+    #[test]
+    fn every_panel_in_the_tree_has_its_config_and_the_3d_panel_follows_the_frame() {
+        let layout = layout_json(&target("velo_link"));
+        assert_panels_match(&layout);
+        let config = layout["configById"].as_object().unwrap();
         let three_d = &config["3D!looming"];
         assert_eq!(three_d["followTf"], "velo_link");
         assert_eq!(three_d["topics"]["/velodyne_points"]["visible"], false);

@@ -5,12 +5,15 @@
 //! bytes.
 //!
 //! `scans` turns messages into scan pairs (shared with `eval` and `render`
-//! through [`replay()`]), `stages` runs `process`'s threads, `summary` reports
-//! the run, `replace` guards against processing an annotated log twice.
+//! through [`replay()`]; with several LiDARs, a pairer per sensor),
+//! `stages` runs `process`'s threads, `sensors` annotates each LiDAR and
+//! merges their near misses, `summary` reports the run, `replace` guards
+//! against processing an annotated log twice.
 
 mod replace;
 pub mod replay;
 mod scans;
+mod sensors;
 mod stages;
 mod summary;
 
@@ -21,10 +24,11 @@ use std::time::Instant;
 use crate::annotate::AnnotateConfig;
 use crate::input::{InputError, InputFile, ReadMode};
 use crate::output::{OutputError, OutputOptions, WriteMode, check_output_path};
-use crate::topics::{TopicError, TopicSelection, select};
+use crate::topics::{TopicError, TopicSelection, select_sensors};
 
 pub use replay::{ReplayError, ReplayReport, replay, replay_input};
 pub use scans::{BadMessage, BadMessages, DecodedCounts, ScanOptions};
+pub use sensors::SensorOutcome;
 pub use summary::{NO_LIDAR_COPIED, RUN_METADATA_NAME, RunSummary};
 
 use replace::refuse_processed_input;
@@ -125,11 +129,11 @@ pub fn process(
     }
     let mut restarted_because = None;
     loop {
-        let topics = match select(input.catalog(), &config.scans.topics) {
-            Ok(topics) => topics,
+        let sensors = match select_sensors(input.catalog(), &config.scans.topics) {
+            Ok(sensors) => sensors,
             // Nothing to decode: the pass copies every record.
             Err(TopicError::Missing(_)) if config.if_no_lidar == NoLidarPolicy::Copy => {
-                TopicSelection::none()
+                vec![TopicSelection::none()]
             }
             Err(source) => {
                 return Err(ProcessError::Topic {
@@ -139,7 +143,7 @@ pub fn process(
             }
         };
         let write_mode = choose_write_mode(config, &input);
-        let outcome = run_once(config, &input, &topics, &write_mode, progress)?;
+        let outcome = run_once(config, &input, &sensors, &write_mode, progress)?;
         // IndexedReader silently skips messages outside chunks: if the count
         // disagrees with the statistics, read the file linearly instead.
         let expected = input.expected_messages();
@@ -159,7 +163,7 @@ pub fn process(
             continue;
         }
         let run = Run {
-            topics,
+            sensors,
             write_mode,
             started,
             restarted_because,

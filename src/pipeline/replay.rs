@@ -63,7 +63,7 @@ pub fn replay_input(
         path: path.clone(),
         source,
     })?;
-    let decoder = Decoder::new(options, &topics, &path);
+    let decoder = Decoder::new(options, std::slice::from_ref(&topics), &path);
     let mut stage = PairingStage::new(options, input.catalog(), &topics);
     let mut pairs = 0u64;
     let mut strict_failure = None;
@@ -75,7 +75,7 @@ pub fn replay_input(
         let decoded = decoder.decode(message.channel_id, message.log_time_ns, &message.data);
         match decoded {
             None => {}
-            Some(Ok((log_time_ns, decoded))) => {
+            Some(Ok((log_time_ns, _, decoded))) => {
                 for pair in stage.push(log_time_ns, decoded) {
                     pairs += 1;
                     on_pair(pair);

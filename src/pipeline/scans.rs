@@ -92,8 +92,8 @@ pub(crate) fn finish_read(
     }
 }
 
-/// A decoded message: its log time and what it holds.
-pub(crate) type DecodeResult = Result<(u64, Decoded), BadMessage>;
+/// A decoded message: its log time, its channel and what it holds.
+pub(crate) type DecodeResult = Result<(u64, u16, Decoded), BadMessage>;
 
 /// Decodes the messages of the selected topics.
 pub(crate) struct Decoder<'a> {
@@ -103,14 +103,19 @@ pub(crate) struct Decoder<'a> {
 }
 
 impl<'a> Decoder<'a> {
+    /// The decoder of every channel the `sensors`' selections name.
     pub(crate) fn new(
         options: &'a ScanOptions,
-        topics: &'a TopicSelection,
+        sensors: &'a [TopicSelection],
         file_name: &str,
     ) -> Self {
         Self {
             limits: &options.decode_limits,
-            by_channel: topics.all().map(|c| (c.channel_id, c)).collect(),
+            by_channel: sensors
+                .iter()
+                .flat_map(TopicSelection::all)
+                .map(|c| (c.channel_id, c))
+                .collect(),
             file_name: file_name.to_owned(),
         }
     }
@@ -127,7 +132,7 @@ impl<'a> Decoder<'a> {
         let decoded = decode::decode(channel.kind, channel.encoding, is_static, data, self.limits);
         Some(
             decoded
-                .map(|decoded| (log_time_ns, decoded))
+                .map(|decoded| (log_time_ns, channel_id, decoded))
                 .map_err(|err| BadMessage {
                     file: self.file_name.clone(),
                     topic: channel.topic.clone(),
@@ -210,6 +215,101 @@ impl PairingStage {
         }
         pairs
     }
+}
+
+/// The pairing stages of a log's LiDAR sensors: each sensor's scans go to
+/// its own pairer (sensors out of step, at other rates or with dropouts, are
+/// paired independently); the motion and transform messages they share go
+/// to every pairer.
+pub(crate) struct SensorPairing {
+    stages: Vec<PairingStage>,
+    /// The LiDAR channel of each stage.
+    lidar_channels: Vec<u16>,
+    pub(crate) bad: BadMessages,
+}
+
+impl SensorPairing {
+    pub(crate) fn new(
+        options: &ScanOptions,
+        catalog: &Catalog,
+        sensors: &[TopicSelection],
+    ) -> Self {
+        Self {
+            stages: sensors
+                .iter()
+                .map(|topics| PairingStage::new(options, catalog, topics))
+                .collect(),
+            lidar_channels: sensors
+                .iter()
+                .map(|topics| topics.lidar.as_ref().map_or(u16::MAX, |c| c.channel_id))
+                .collect(),
+            bad: BadMessages::default(),
+        }
+    }
+
+    /// A decoded message of `channel_id` in; the pairs it completes out, with
+    /// the index of their sensor.
+    pub(crate) fn push(
+        &mut self,
+        log_time_ns: u64,
+        channel_id: u16,
+        decoded: Decoded,
+    ) -> Vec<(usize, ScanPair)> {
+        if let Decoded::Scan(_) = decoded {
+            let Some(sensor) = self.lidar_channels.iter().position(|&c| c == channel_id) else {
+                return Vec::new();
+            };
+            return tagged(sensor, self.stages[sensor].push(log_time_ns, decoded));
+        }
+        let last = self.stages.len().saturating_sub(1);
+        let mut pairs = Vec::new();
+        let mut decoded = Some(decoded);
+        for (sensor, stage) in self.stages.iter_mut().enumerate() {
+            // The last stage takes the message itself; the others a copy.
+            let message = if sensor == last {
+                decoded.take()
+            } else {
+                decoded.clone()
+            };
+            if let Some(message) = message {
+                pairs.extend(tagged(sensor, stage.push(log_time_ns, message)));
+            }
+        }
+        pairs
+    }
+
+    /// The end of the log: the pairs every sensor still holds.
+    pub(crate) fn finish(&mut self) -> Vec<(usize, ScanPair)> {
+        let mut pairs = Vec::new();
+        for (sensor, stage) in self.stages.iter_mut().enumerate() {
+            pairs.extend(tagged(sensor, stage.finish()));
+        }
+        pairs
+    }
+
+    pub(crate) fn stages(&self) -> &[PairingStage] {
+        &self.stages
+    }
+
+    /// What was decoded over all sensors: each sensor's scans, the shared
+    /// messages once.
+    pub(crate) fn decoded(&self) -> DecodedCounts {
+        let mut counts = self
+            .stages
+            .first()
+            .map(|s| s.decoded.clone())
+            .unwrap_or_default();
+        for stage in self.stages.iter().skip(1) {
+            counts.scans += stage.decoded.scans;
+            counts.lidar_points += stage.decoded.lidar_points;
+            counts.invalid_points_skipped += stage.decoded.invalid_points_skipped;
+        }
+        counts
+    }
+}
+
+fn tagged(sensor: usize, pairs: Vec<ScanPair>) -> Vec<(usize, ScanPair)> {
+    pairs.into_iter().map(|pair| (sensor, pair)).collect()
 }
 
 fn feed(

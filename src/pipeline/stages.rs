@@ -6,23 +6,18 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
-use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
-use crate::annotate::{AnnotateStats, Annotator, OwnMessage, channel_specs};
+use crate::annotate::OwnMessage;
 use crate::budget::{ByteBudget, Ticket};
-use crate::events::NearMissEvent;
 use crate::input::{Catalog, CopiedRecord, CopyEvent, Flow, InputFile, InputRecord, ReadReport};
-use crate::model::{Decoded, ScanPair};
+use crate::model::Decoded;
 use crate::output::{Copied, OutputWriter, WriteMode};
 use crate::topics::TopicSelection;
 
 use super::replace::without_our_channels;
-use super::scans::{
-    BadMessage, BadMessages, DecodeResult, DecodedCounts, Decoder, PairingStage, ReadFailure,
-    finish_read,
-};
+use super::scans::{BadMessage, DecodeResult, Decoder, ReadFailure, SensorPairing, finish_read};
+use super::sensors::{Annotation, PairingOutcome, add_own_channels, outcome};
 use super::summary::RUN_METADATA_NAME;
 use super::{ProcessConfig, ProcessError, ProgressSink};
-use crate::pairing::PairingStats;
 
 /// Items between the reader and pairing stages. Channels hold few items: point
 /// clouds are megabytes each.
@@ -60,13 +55,14 @@ enum FromReader {
     Copy(CopiedRecord, Ticket),
     Decoded {
         log_time_ns: u64,
+        channel_id: u16,
         decoded: Decoded,
     },
     Bad(BadMessage),
 }
 
 /// Items for the writer.
-enum ToWriter {
+pub(super) enum ToWriter {
     Input(InputRecord),
     Copy(CopiedRecord, Ticket),
     Own(OwnMessage),
@@ -75,7 +71,7 @@ enum ToWriter {
 pub(super) fn run_once(
     config: &ProcessConfig,
     input: &InputFile,
-    topics: &TopicSelection,
+    sensors: &[TopicSelection],
     write_mode: &WriteMode,
     progress: &dyn ProgressSink,
 ) -> Result<PassOutcome, ProcessError> {
@@ -100,15 +96,16 @@ pub(super) fn run_once(
         }
     };
     // A log copied through for want of a LiDAR gets no channel of ours.
-    let annotation = match topics.lidar {
-        Some(_) => Some(add_own_channels(&mut writer, config)?),
-        None => None,
+    let annotation = if sensors.iter().any(|t| t.lidar.is_some()) {
+        Some(add_own_channels(&mut writer, config, sensors)?)
+    } else {
+        None
     };
-    let pairing_stage = PairingStage::new(&config.scans, input.catalog(), topics);
+    let pairing_stage = SensorPairing::new(&config.scans, input.catalog(), sensors);
     let (reader_tx, reader_rx) = sync_channel::<FromReader>(STAGE_QUEUE_LEN);
     let (writer_tx, writer_rx) = sync_channel::<ToWriter>(STAGE_QUEUE_LEN);
     std::thread::scope(|scope| {
-        let reader = scope.spawn(|| read_and_decode(config, input, topics, write_mode, reader_tx));
+        let reader = scope.spawn(|| read_and_decode(config, input, sensors, write_mode, reader_tx));
         let pairing =
             scope.spawn(move || pair_scans(pairing_stage, annotation, reader_rx, writer_tx));
         let written = write_all(
@@ -136,38 +133,17 @@ pub(super) fn run_once(
     })
 }
 
-/// Our channels in the output, and the annotator that fills them.
-struct Annotation {
-    annotator: Annotator,
-    pairs_channel: u16,
-}
-
-fn add_own_channels(
-    writer: &mut OutputWriter,
-    config: &ProcessConfig,
-) -> Result<Annotation, ProcessError> {
-    let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
-    let annotate_channels = channel_specs()
-        .iter()
-        .map(|spec| writer.add_own_channel(spec))
-        .collect::<Result<Vec<u16>, _>>()?;
-    Ok(Annotation {
-        annotator: Annotator::new(config.annotate.clone(), &annotate_channels),
-        pairs_channel,
-    })
-}
-
 /// Stage 1: read records and decode the selected topics.
 fn read_and_decode(
     config: &ProcessConfig,
     input: &InputFile,
-    topics: &TopicSelection,
+    sensors: &[TopicSelection],
     write_mode: &WriteMode,
     tx: SyncSender<FromReader>,
 ) -> Result<ReadReport, ProcessError> {
     let file_name = input.path().display().to_string();
     let mut stage = ReadStage {
-        decoder: Decoder::new(&config.scans, topics, &file_name),
+        decoder: Decoder::new(&config.scans, sensors, &file_name),
         tx,
         copy_budget: ByteBudget::new(COPY_BUDGET_BYTES),
         strict: config.scans.strict,
@@ -176,7 +152,11 @@ fn read_and_decode(
     };
     let result = match write_mode {
         WriteMode::PassThrough => {
-            let selected: BTreeSet<u16> = topics.all().map(|c| c.channel_id).collect();
+            let selected: BTreeSet<u16> = sensors
+                .iter()
+                .flat_map(TopicSelection::all)
+                .map(|c| c.channel_id)
+                .collect();
             input.read_copying(config.scans.strict, &selected, &mut |event| {
                 stage.copy_event(event)
             })
@@ -277,8 +257,9 @@ impl ReadStage<'_> {
     fn deliver(&mut self, decoded: Option<DecodeResult>) -> Flow {
         let item = match decoded {
             None => return Flow::Continue(()),
-            Some(Ok((log_time_ns, decoded))) => FromReader::Decoded {
+            Some(Ok((log_time_ns, channel_id, decoded))) => FromReader::Decoded {
                 log_time_ns,
+                channel_id,
                 decoded,
             },
             Some(Err(bad)) if self.strict => {
@@ -291,26 +272,15 @@ impl ReadStage<'_> {
     }
 }
 
-/// What the pairing stage saw.
-pub(super) struct PairingOutcome {
-    pub(super) decoded: DecodedCounts,
-    pub(super) stats: PairingStats,
-    pub(super) pairs_written: u64,
-    pub(super) bad: BadMessages,
-    pub(super) warnings: Vec<String>,
-    pub(super) annotation: AnnotateStats,
-    pub(super) events: Vec<NearMissEvent>,
-}
-
-/// Stage 2: feed the pairer, pass every record on, add `/looming/pairs` and
-/// the annotation of every pair (without `annotation`, only pass records on).
+/// Stage 2: feed the pairers, pass every record on, add each sensor's
+/// `/looming/pairs` and the annotation of every pair (without `annotation`,
+/// only pass records on).
 fn pair_scans(
-    mut stage: PairingStage,
+    mut stage: SensorPairing,
     mut annotation: Option<Annotation>,
     rx: Receiver<FromReader>,
     tx: SyncSender<ToWriter>,
 ) -> PairingOutcome {
-    let mut pairs_written = 0;
     for item in rx {
         let pairs = match item {
             FromReader::Record(record) => {
@@ -331,70 +301,24 @@ fn pair_scans(
             }
             FromReader::Decoded {
                 log_time_ns,
+                channel_id,
                 decoded,
-            } => stage.push(log_time_ns, decoded),
+            } => stage.push(log_time_ns, channel_id, decoded),
         };
         if let Some(annotation) = &mut annotation
-            && !annotation.emit(pairs, &mut pairs_written, &tx)
+            && !annotation.emit(pairs, &tx)
         {
             break;
         }
     }
     let pairs = stage.finish();
+    let mut events = Vec::new();
     if let Some(annotation) = &mut annotation
-        && annotation.emit(pairs, &mut pairs_written, &tx)
+        && annotation.emit(pairs, &tx)
     {
-        for message in annotation.annotator.finish() {
-            if tx.send(ToWriter::Own(message)).is_err() {
-                break;
-            }
-        }
+        events = annotation.finish(&tx);
     }
-    let annotator = annotation.as_ref().map(|a| &a.annotator);
-    PairingOutcome {
-        stats: stage.stats().clone(),
-        decoded: stage.decoded,
-        pairs_written,
-        bad: stage.bad,
-        warnings: stage.warnings,
-        annotation: annotator.map(|a| a.stats().clone()).unwrap_or_default(),
-        events: annotator.map(|a| a.events().to_vec()).unwrap_or_default(),
-    }
-}
-
-impl Annotation {
-    /// Send the pairer's pairs on, annotated; false when the writer has gone.
-    fn emit(
-        &mut self,
-        pairs: Vec<ScanPair>,
-        pairs_written: &mut u64,
-        tx: &SyncSender<ToWriter>,
-    ) -> bool {
-        for pair in pairs {
-            // The pair's quality figures come from its annotation; its
-            // record still goes out first.
-            let annotation = self.annotator.annotate(&pair);
-            let mut record = PairRecord::from_pair(&pair);
-            record.quality = self.annotator.take_quality();
-            let data = serde_json::to_vec(&record).expect("pair records always serialise");
-            let item = ToWriter::Own(OwnMessage {
-                channel_id: self.pairs_channel,
-                sequence: *pairs_written as u32,
-                log_time_ns: pair.current_log_time_ns,
-                data,
-            });
-            *pairs_written += 1;
-            if tx.send(item).is_err() {
-                return false;
-            }
-            for message in annotation {
-                if tx.send(ToWriter::Own(message)).is_err() {
-                    return false;
-                }
-            }
-        }
-        true
-    }
+    outcome(&stage, annotation.as_ref(), events)
 }
 
 /// Stage 3 (calling thread): write everything, reporting progress.

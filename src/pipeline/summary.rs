@@ -13,6 +13,7 @@ use crate::pairing::PairingStats;
 use crate::topics::TopicSelection;
 
 use super::scans::{BadMessage, DecodedCounts};
+use super::sensors::SensorOutcome;
 use super::stages::PassOutcome;
 use super::{ProcessConfig, ProcessError};
 
@@ -29,7 +30,11 @@ pub struct RunSummary {
     pub read: ReadMode,
     /// Input chunks copied as they are, or every message written anew.
     pub write: WriteMode,
+    /// The topics of the (first) LiDAR sensor and the motion sources.
     pub topics: TopicSelection,
+    /// With several LiDARs: each sensor's figures (empty with one).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<SensorOutcome>,
     pub messages_copied: u64,
     pub metadata_copied: u64,
     pub attachments_copied: u64,
@@ -54,7 +59,8 @@ pub struct RunSummary {
 
 /// What a finished pass was run with.
 pub(super) struct Run {
-    pub(super) topics: TopicSelection,
+    /// One selection per LiDAR sensor (one `none` for a log copied through).
+    pub(super) sensors: Vec<TopicSelection>,
     pub(super) write_mode: WriteMode,
     pub(super) started: Instant,
     pub(super) restarted_because: Option<String>,
@@ -67,7 +73,7 @@ pub(super) fn finish_run(
     outcome: PassOutcome,
 ) -> Result<RunSummary, ProcessError> {
     let Run {
-        topics,
+        sensors,
         write_mode,
         started,
         restarted_because,
@@ -79,7 +85,11 @@ pub(super) fn finish_run(
         pairing,
     } = outcome;
     let stats = pairing.stats.clone();
-    writer.write_metadata(&run_metadata(config, input, &topics, &write_mode, &stats))?;
+    let topics = sensors
+        .first()
+        .cloned()
+        .unwrap_or_else(TopicSelection::none);
+    writer.write_metadata(&run_metadata(config, input, &sensors, &write_mode, &stats))?;
     let output_bytes = writer.finish()?;
     let mut warnings: Vec<String> = Vec::new();
     if topics.lidar.is_none() {
@@ -109,6 +119,7 @@ pub(super) fn finish_run(
         read: input.mode().clone(),
         write: write_mode,
         topics,
+        sensors: pairing.sensors,
         messages_copied: summary_counts.messages,
         metadata_copied: summary_counts.metadata,
         attachments_copied: summary_counts.attachments,
@@ -137,16 +148,20 @@ pub const RUN_METADATA_NAME: &str = "looming";
 fn run_metadata(
     config: &ProcessConfig,
     input: &InputFile,
-    topics: &TopicSelection,
+    sensors: &[TopicSelection],
     write_mode: &WriteMode,
     stats: &PairingStats,
 ) -> mcap::records::Metadata {
+    let topics = sensors
+        .first()
+        .cloned()
+        .unwrap_or_else(TopicSelection::none);
     let input_name = config
         .input
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let resolved = serde_json::json!({
+    let mut resolved = serde_json::json!({
         "input_file": input_name,
         "read": input.mode(),
         "write": write_mode,
@@ -163,6 +178,10 @@ fn run_metadata(
         "replace": config.replace,
         "if_no_lidar": config.if_no_lidar,
     });
+    if sensors.len() > 1 {
+        // Every sensor's topics (`topics` is the first's).
+        resolved["sensors"] = serde_json::json!(sensors);
+    }
     let mut metadata = BTreeMap::new();
     metadata.insert("tool".to_string(), "looming".to_string());
     metadata.insert("version".to_string(), env!("CARGO_PKG_VERSION").to_string());

@@ -291,3 +291,40 @@ pub fn rewrite_mcap(
     writer.finish().unwrap();
 }
 pub mod viewer;
+
+/// `bytes` (an MCAP) with a new channel `topic` carrying every message of
+/// channel `from_topic` again: a second sensor publishing the same data.
+pub fn with_channel_copy(bytes: &[u8], from_topic: &str, topic: &str) -> Vec<u8> {
+    let contents = read_all(bytes);
+    let (&from, source) = contents
+        .channels
+        .iter()
+        .find(|(_, c)| c.topic == from_topic)
+        .expect("the channel to copy");
+    let mut log = looming::testkit::LogBuilder::new(looming::testkit::Layout::indexed(), "ros2");
+    for (id, channel) in &contents.channels {
+        let schema = channel.schema.clone().unwrap();
+        log.schema(schema.id, &schema.name, &schema.encoding, &schema.data);
+        log.channel(*id, schema.id, &channel.topic, &channel.message_encoding);
+    }
+    let copy = contents.channels.keys().max().copied().unwrap_or(0) + 1;
+    log.channel(
+        copy,
+        source.schema.as_ref().unwrap().id,
+        topic,
+        &source.message_encoding,
+    );
+    for m in &contents.messages {
+        log.message(
+            m.channel_id,
+            m.sequence,
+            m.log_time,
+            m.publish_time,
+            &m.data,
+        );
+        if m.channel_id == from {
+            log.message(copy, m.sequence, m.log_time, m.publish_time, &m.data);
+        }
+    }
+    log.finish()
+}

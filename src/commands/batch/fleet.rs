@@ -53,6 +53,10 @@ pub struct FleetNearMiss {
     /// Distance of that object (or of its cluster, on no object) from the
     /// vehicle's swept path at the peak, m.
     pub lateral_offset_m: f64,
+    /// With several LiDARs: the sensors that saw it, the one whose view the
+    /// figures are (and whose object list `object_id` is on) first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<String>,
 }
 
 /// Every near miss of `records`, ranked: smallest time to contact first,
@@ -86,6 +90,7 @@ pub fn ranked_near_misses(records: &[LogRecord]) -> Vec<FleetNearMiss> {
                     .map(|c| c.path.clone()),
                 object_id: event.object_id,
                 lateral_offset_m: event.peak.lateral_offset_m,
+                sensors: sensors_best_first(event),
             }
         })
         .collect()
@@ -156,6 +161,7 @@ fn fleet_layout_target(records: &[LogRecord]) -> Option<crate::commands::layout:
         frame_id: frame.to_owned(),
         lidar_topic: None,
         frame_from: "the fleet's annotated logs".into(),
+        sensors: Vec::new(),
     })
 }
 
@@ -188,15 +194,25 @@ fn foxglove_event(rank: usize, record: &LogRecord, event: &NearMissEvent) -> ser
     })
 }
 
+/// An event's sensors, the one with the best view first.
+fn sensors_best_first(event: &crate::events::NearMissEvent) -> Vec<String> {
+    let mut sensors = event.sensors.clone();
+    if let Some(best) = &event.sensor {
+        sensors.retain(|s| s != best);
+        sensors.insert(0, best.clone());
+    }
+    sensors
+}
+
 /// The ranking as CSV (paths quoted).
 fn csv_text(near_misses: &[FleetNearMiss]) -> String {
     let mut text = String::from(
-        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture,clip,object_id,lateral_offset_m\n",
+        "rank,log,output,event_id,start_log_time_ns,end_log_time_ns,duration_s,min_time_to_contact_s,peak_looming_per_s,range_m,bearing_deg,ego_speed_mps,moving,range_picture,top_picture,clip,object_id,lateral_offset_m,sensors\n",
     );
     let quoted = |path: &Path| format!("\"{}\"", path.display().to_string().replace('"', "\"\""));
     for n in near_misses {
         text.push_str(&format!(
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{},{},{},{:.2}\n",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.2},{:.1},{},{},{},{},{},{},{:.2},{}\n",
             n.rank,
             quoted(&n.log),
             n.output.as_deref().map_or(String::new(), quoted),
@@ -215,6 +231,8 @@ fn csv_text(near_misses: &[FleetNearMiss]) -> String {
             n.clip.as_deref().map_or(String::new(), quoted),
             n.object_id.map_or(String::new(), |id| id.to_string()),
             n.lateral_offset_m,
+            // Space-separated: sensor names hold no space or comma.
+            n.sensors.join(" "),
         ));
     }
     text

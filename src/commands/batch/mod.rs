@@ -25,8 +25,8 @@ pub use fleet::{
 pub use inputs::{BatchLog, Shard, discover};
 pub use pictures::MAX_PICTURED_EVENTS;
 pub use record::{
-    EventClip, EventPictures, FleetEntry, FleetQuality, InputFingerprint, LogRecord, LogStatus,
-    PeakSeries,
+    EventClip, EventPictures, FleetEntry, FleetQuality, FleetSensorQuality, InputFingerprint,
+    LogRecord, LogStatus, PeakSeries,
 };
 
 use crate::output::remove_stale_temp_files;
@@ -374,7 +374,12 @@ fn process_log(
             // Processed, but only up to where the file ends.
             entry.reason = summary.input_report.truncated.clone();
             record.near_misses = summary.events;
-            describe_processed(options, log, &config, output, &mut record);
+            let sensor_topics: Vec<(String, String)> = summary
+                .sensors
+                .iter()
+                .map(|s| (s.name.clone(), s.topic.clone()))
+                .collect();
+            describe_processed(options, log, &config, output, &sensor_topics, &mut record);
         }
         Err(ProcessError::Topic {
             source: TopicError::Missing(reason),
@@ -397,6 +402,7 @@ fn describe_processed(
     log: &BatchLog,
     config: &ProcessConfig,
     output: &Path,
+    sensor_topics: &[(String, String)],
     record: &mut LogRecord,
 ) {
     let report = crate::commands::quality::read_quality(output).ok();
@@ -416,6 +422,7 @@ fn describe_processed(
         &options.out_dir,
         &log.relative,
         &record.near_misses,
+        sensor_topics,
     );
     match drawn {
         Ok(pictures) => record.pictures = pictures,
@@ -470,9 +477,28 @@ fn add_reason(record: &mut LogRecord, said: String) {
 
 /// The quality figures of an annotated log that the fleet table shows.
 fn fleet_quality(report: crate::commands::quality::QualityReport) -> FleetQuality {
+    // Several LiDARs: each sensor's trust, and the log's over all their points.
+    let sensors: Vec<FleetSensorQuality> = report
+        .sensors
+        .iter()
+        .map(|sensor| FleetSensorQuality {
+            sensor: sensor.sensor.clone().unwrap_or_default(),
+            trusted_fraction: sensor.totals.trusted_fraction,
+            diagnoses: sensor.diagnoses.iter().map(|d| d.code.clone()).collect(),
+        })
+        .collect();
+    let (points, trusted) = report.sensors.iter().fold((0, 0), |(p, t), s| {
+        (p + s.totals.points, t + s.totals.trusted_points)
+    });
     let totals = report.totals;
+    let trusted_fraction = if sensors.is_empty() || points == 0 {
+        totals.trusted_fraction
+    } else {
+        Some(trusted as f64 / points as f64)
+    };
     FleetQuality {
-        trusted_fraction: totals.trusted_fraction,
+        sensors,
+        trusted_fraction,
         ground_median_abs_fused_per_s: totals.ground_median_abs_fused_per_s,
         ground_p90_abs_fused_per_s: totals.ground_p90_abs_fused_per_s,
         ground_moving_fraction: totals.ground_moving_fraction,

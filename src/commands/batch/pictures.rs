@@ -42,6 +42,7 @@ pub(super) fn draw_event_pictures(
     out_dir: &Path,
     relative: &Path,
     events: &[NearMissEvent],
+    sensor_topics: &[(String, String)],
 ) -> Result<Vec<EventPictures>, RenderError> {
     let dir = pictures_dir(relative);
     let absolute_dir = out_dir.join(&dir);
@@ -61,39 +62,59 @@ pub(super) fn draw_event_pictures(
             top_png: dir.join(format!("event-{}-top.png", event.id)),
         })
         .collect();
-    let requests: Vec<Picture> = events
-        .iter()
-        .zip(&pictured)
-        .flat_map(|(event, paths)| {
-            let at = RenderAt::LogTimeNs(event.peak.log_time_ns);
-            [
-                Picture {
-                    at,
-                    channel: RenderChannel::Fused,
-                    view: RenderView::Range,
-                    output: out_dir.join(&paths.range_png),
-                },
-                Picture {
-                    at,
-                    channel: RenderChannel::Threat,
-                    view: RenderView::Top,
-                    output: out_dir.join(&paths.top_png),
-                },
-            ]
-        })
-        .collect();
-    let options = RenderOptions {
-        input: input.to_path_buf(),
-        row_height_px: RANGE_ROW_HEIGHT_PX,
-        top_extent_m: TOP_EXTENT_M,
-        top_size_px: TOP_SIZE_PX,
-        force: true,
-        scans: config.scans.clone(),
-        engine: config.annotate.engine.clone(),
-        ..RenderOptions::default()
-    };
-    render_pictures(&options, &requests)?;
+    // On a log with several LiDARs each near miss is drawn from the sensor
+    // whose figures it gives (`NearMissEvent::sensor`).
+    let mut by_topic: std::collections::BTreeMap<Option<&str>, Vec<Picture>> =
+        std::collections::BTreeMap::new();
+    for (event, paths) in events.iter().zip(&pictured) {
+        let topic = event.sensor.as_deref().and_then(|name| {
+            sensor_topics
+                .iter()
+                .find(|(sensor, _)| sensor == name)
+                .map(|(_, topic)| topic.as_str())
+        });
+        by_topic
+            .entry(topic)
+            .or_default()
+            .extend(requests_of(event, paths, out_dir));
+    }
+    for (topic, requests) in by_topic {
+        let mut scans = config.scans.clone();
+        if let Some(topic) = topic {
+            scans.topics.lidar = Some(topic.to_owned());
+        }
+        let options = RenderOptions {
+            input: input.to_path_buf(),
+            row_height_px: RANGE_ROW_HEIGHT_PX,
+            top_extent_m: TOP_EXTENT_M,
+            top_size_px: TOP_SIZE_PX,
+            force: true,
+            scans,
+            engine: config.annotate.engine.clone(),
+            ..RenderOptions::default()
+        };
+        render_pictures(&options, &requests)?;
+    }
     Ok(pictured)
+}
+
+/// The range image and the top view of an event's peak pair.
+fn requests_of(event: &NearMissEvent, paths: &EventPictures, out_dir: &Path) -> [Picture; 2] {
+    let at = RenderAt::LogTimeNs(event.peak.log_time_ns);
+    [
+        Picture {
+            at,
+            channel: RenderChannel::Fused,
+            view: RenderView::Range,
+            output: out_dir.join(&paths.range_png),
+        },
+        Picture {
+            at,
+            channel: RenderChannel::Threat,
+            view: RenderView::Top,
+            output: out_dir.join(&paths.top_png),
+        },
+    ]
 }
 
 /// Most points of a plotted series: an hour at 10 Hz is kept as the

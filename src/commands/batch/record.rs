@@ -92,12 +92,27 @@ pub struct FleetEntry {
 /// (`docs/quality.md`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FleetQuality {
+    /// Share of the points the engine trusts (with several LiDARs, over all
+    /// their points).
     pub trusted_fraction: Option<f64>,
     pub ground_median_abs_fused_per_s: Option<f64>,
     pub ground_p90_abs_fused_per_s: Option<f64>,
     pub ground_moving_fraction: Option<f64>,
     pub dominant_mask: Option<String>,
     /// The codes of `looming quality`'s diagnoses (`low_trust`, ...).
+    pub diagnoses: Vec<String>,
+    /// With several LiDARs, each sensor's (the other figures are the first
+    /// sensor's); absent with one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<FleetSensorQuality>,
+}
+
+/// One sensor's trust on a log with several LiDARs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FleetSensorQuality {
+    /// Its name in our topics (`/looming/<sensor>/...`).
+    pub sensor: String,
+    pub trusted_fraction: Option<f64>,
     pub diagnoses: Vec<String>,
 }
 

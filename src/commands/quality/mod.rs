@@ -23,7 +23,7 @@ mod tests;
 
 use crate::input::InputError;
 
-pub use self::read::read_quality;
+pub use self::read::{read_quality, read_sensor_qualities};
 pub use self::report::{
     Diagnosis, GroundSides, QualityReport, QualityTotals, RangeNoise, RangeOffsets, ScanLine,
 };

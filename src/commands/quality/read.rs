@@ -8,7 +8,7 @@ use serde::Deserialize;
 use super::QualityError;
 use super::report::QualityReport;
 use super::totals::Builder;
-use crate::annotate::topics::{EVENTS_TOPIC, PAIRS_TOPIC};
+use crate::annotate::topics::{EVENTS_TOPIC, sensor_of_pairs_topic};
 use crate::commands::annotated::read_json_channel;
 use crate::input::{InputFile, InputOptions};
 use crate::quality::PairQuality;
@@ -48,33 +48,68 @@ pub(super) fn layout_text(layout: Option<&serde_json::Value>) -> String {
     }
 }
 
-/// Read an annotated log and sum its quality figures.
+/// Read an annotated log and sum its quality figures. On a log with
+/// several LiDARs, the first sensor's report carrying every sensor's in
+/// `sensors`.
 pub fn read_quality(path: &Path) -> Result<QualityReport, QualityError> {
+    let mut reports = read_sensor_qualities(path)?;
+    if reports.len() == 1 {
+        return Ok(reports.remove(0));
+    }
+    let mut report = reports[0].clone();
+    report.sensors = reports;
+    Ok(report)
+}
+
+/// The quality of each LiDAR of an annotated log: one report (sensor
+/// `None`) for `/looming/pairs`, or one per `/looming/<sensor>/pairs` on a
+/// log with several LiDARs. The log's near misses count in each.
+pub fn read_sensor_qualities(path: &Path) -> Result<Vec<QualityReport>, QualityError> {
     let input = InputFile::open(path, InputOptions::default())?;
     let name = path.display().to_string();
     let channels = &input.catalog().channels;
-    let pairs_channel = channels
+    let mut pairs_channels: Vec<(Option<String>, u16)> = channels
         .values()
-        .find(|c| c.topic == PAIRS_TOPIC)
-        .map(|c| c.id)
-        .ok_or_else(|| QualityError::NotProcessed { path: name.clone() })?;
+        .filter_map(|c| sensor_of_pairs_topic(&c.topic).map(|sensor| (sensor, c.id)))
+        .collect();
+    pairs_channels.sort_by_key(|(_, id)| *id);
+    if pairs_channels.is_empty() {
+        return Err(QualityError::NotProcessed { path: name });
+    }
     let events_channel = channels
         .values()
         .find(|c| c.topic == EVENTS_TOPIC)
         .map(|c| c.id);
+    pairs_channels
+        .into_iter()
+        .map(|(sensor, pairs_channel)| {
+            let mut report = read_pairs(&input, &name, pairs_channel, events_channel)?;
+            report.sensor = sensor;
+            Ok(report)
+        })
+        .collect()
+}
+
+/// One pairs channel's figures.
+fn read_pairs(
+    input: &InputFile,
+    name: &str,
+    pairs_channel: u16,
+    events_channel: Option<u16>,
+) -> Result<QualityReport, QualityError> {
     let mut builder = Builder::default();
     let mut events = 0u64;
     read_json_channel(
-        &input,
+        input,
         pairs_channel,
         &mut |pair: PairMessage| builder.add(pair),
         &mut |channel| events += u64::from(Some(channel) == events_channel),
     )?
     .map_err(|bad| QualityError::BadRecord {
-        path: name.clone(),
+        path: name.to_owned(),
         log_time_ns: bad.log_time_ns,
         reason: bad.reason,
     })?;
     builder.count_events(events);
-    Ok(builder.finish(name))
+    Ok(builder.finish(name.to_owned()))
 }

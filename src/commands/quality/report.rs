@@ -141,4 +141,12 @@ pub struct QualityReport {
     pub scans: Vec<ScanLine>,
     pub totals: QualityTotals,
     pub diagnoses: Vec<Diagnosis>,
+    /// On a log with several LiDARs: the sensor this report is of (its name
+    /// in our topics, `/looming/<sensor>/pairs`); absent with one LiDAR.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<String>,
+    /// On a log with several LiDARs, in the report of the whole log: every
+    /// sensor's report (the top-level figures are the first sensor's).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<QualityReport>,
 }

@@ -31,10 +31,48 @@ fn signed_deg(value: Option<f64>) -> String {
 }
 
 impl QualityReport {
-    /// The report as text: one line per scan, then the totals and diagnoses.
+    /// The report as text: one line per scan, then the totals and diagnoses;
+    /// on a log with several LiDARs, each sensor's in turn and a line per
+    /// sensor at the end.
     pub fn to_text(&self) -> String {
+        if self.sensors.is_empty() {
+            return self.one_sensor_text();
+        }
         let mut out = String::new();
-        write_scans(&mut out, &self.input, &self.scans);
+        for sensor in &self.sensors {
+            out.push_str(&sensor.one_sensor_text());
+            out.push('\n');
+        }
+        let _ = writeln!(out, "sensors");
+        for sensor in &self.sensors {
+            let t = &sensor.totals;
+            let codes: Vec<&str> = sensor.diagnoses.iter().map(|d| d.code.as_str()).collect();
+            let _ = writeln!(
+                out,
+                "  {:<16} {} pairs, trusted {}, ground median |fused| {}{}",
+                sensor.sensor.as_deref().unwrap_or("lidar"),
+                t.pairs,
+                t.trusted_fraction
+                    .map_or("-".into(), |f| format!("{:.1} %", 100.0 * f)),
+                t.ground_median_abs_fused_per_s
+                    .map_or("-".into(), |v| format!("{v:.4} 1/s")),
+                if codes.is_empty() {
+                    String::new()
+                } else {
+                    format!("; {}", codes.join(", "))
+                }
+            );
+        }
+        out
+    }
+
+    fn one_sensor_text(&self) -> String {
+        let mut out = String::new();
+        let title = match &self.sensor {
+            Some(sensor) => format!("{} (sensor {sensor})", self.input),
+            None => self.input.clone(),
+        };
+        write_scans(&mut out, &title, &self.scans);
         let t = &self.totals;
         let _ = writeln!(out, "\ntotal");
         write_trust(&mut out, t);

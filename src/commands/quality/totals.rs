@@ -144,6 +144,8 @@ impl Builder {
             scans,
             totals,
             diagnoses,
+            sensor: None,
+            sensors: Vec::new(),
         }
     }
 

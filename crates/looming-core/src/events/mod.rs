@@ -7,6 +7,7 @@
 
 mod cluster;
 mod corridor;
+mod merge;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -18,6 +19,7 @@ use crate::objects::PairObjects;
 
 pub use cluster::{Cluster, ColSpan, PATH_PEAK_FLOOR_TTC_S, hot_clusters, path_peak_looming};
 pub use corridor::{Corridor, PathSource};
+pub use merge::{SensorEvents, merge_sensor_events};
 
 /// Schema of one event (`/looming/events` and the `--events` file's entries).
 pub const EVENT_SCHEMA: &str =
@@ -127,6 +129,13 @@ pub struct NearMissEvent {
     /// belonged to most often; absent when they were on no object.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub object_id: Option<u32>,
+    /// On a log with several LiDARs: every sensor that saw this near miss
+    /// (their events merged, [`merge_sensor_events`]), and the one whose
+    /// view (most cells on it) gave the figures, `frame_id` and `peak`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<String>,
     /// Stamps and log times of the hot scans (at most 600).
     pub scan_stamps_ns: Vec<i64>,
     pub scan_log_times_ns: Vec<u64>,
@@ -564,6 +573,8 @@ impl Track {
             frame_id: frame_id.to_string(),
             corridor,
             object_id: most_frequent(&self.objects),
+            sensors: Vec::new(),
+            sensor: None,
             scan_stamps_ns: self.stamps.iter().map(|s| s.0).collect(),
             scan_log_times_ns: self.stamps.iter().map(|s| s.1).collect(),
             peak: self.peak,

@@ -1,0 +1,277 @@
+//! The annotation side of `process` for one LiDAR or several: our channels
+//! registered per sensor (docs/channels.md, "Several LiDARs"), each sensor's
+//! pairs annotated by its own annotator, the sensors' near misses merged into
+//! the log's one list at the end, and what the pairing stage reports.
+
+use std::sync::mpsc::SyncSender;
+
+use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
+use crate::annotate::topics::{PAIRS_TOPIC, sensor_topic};
+use crate::annotate::{
+    AnnotateStats, Annotator, EventWriter, OwnMessage, channel_specs, event_channel_specs,
+    sensor_channel_ids, sensor_channel_specs,
+};
+use crate::events::{NearMissEvent, SensorEvents, merge_sensor_events};
+use crate::model::{ExtrinsicSource, ScanPair};
+use crate::output::OutputWriter;
+use crate::pairing::PairingStats;
+use crate::topics::{TopicSelection, sensor_names};
+
+use super::scans::{BadMessages, DecodedCounts, SensorPairing};
+use super::stages::ToWriter;
+use super::{ProcessConfig, ProcessError};
+
+/// Our channels in the output, and the annotators that fill them: one per
+/// LiDAR sensor.
+pub(super) struct Annotation {
+    sensors: Vec<SensorAnnotation>,
+    /// With several LiDARs, the log's one set of event channels, written
+    /// when the sensors' events are merged at the end.
+    merged_events: Option<EventWriter>,
+}
+
+/// One sensor's annotator and channels.
+struct SensorAnnotation {
+    name: String,
+    topic: String,
+    annotator: Annotator,
+    pairs_channel: u16,
+    pairs_written: u64,
+    /// Where the sensor sits on the vehicle (from the extrinsic of its
+    /// pairs' motion source), for merging events.
+    vehicle_from_sensor: Option<(String, nalgebra::Isometry3<f64>)>,
+}
+
+/// Registers our channels: as always with one LiDAR; with several, the
+/// log's event channels and then each sensor's channels under its name
+/// (docs/channels.md, "Several LiDARs").
+pub(super) fn add_own_channels(
+    writer: &mut OutputWriter,
+    config: &ProcessConfig,
+    sensors: &[TopicSelection],
+) -> Result<Annotation, ProcessError> {
+    let topics: Vec<&str> = sensors
+        .iter()
+        .filter_map(|t| t.lidar.as_ref().map(|c| c.topic.as_str()))
+        .collect();
+    let names = sensor_names(&topics);
+    let register = |writer: &mut OutputWriter, specs: Vec<crate::output::OwnChannelSpec>| {
+        specs
+            .iter()
+            .map(|spec| writer.add_own_channel(spec))
+            .collect::<Result<Vec<u16>, _>>()
+    };
+    let sensor = |name: &String, topic: &&str, annotator, pairs_channel| SensorAnnotation {
+        name: name.clone(),
+        topic: (*topic).to_owned(),
+        annotator,
+        pairs_channel,
+        pairs_written: 0,
+        vehicle_from_sensor: None,
+    };
+    if names.len() == 1 {
+        let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
+        let ids = register(writer, channel_specs())?;
+        let annotator = Annotator::new(config.annotate.clone(), &ids);
+        return Ok(Annotation {
+            sensors: vec![sensor(&names[0], &topics[0], annotator, pairs_channel)],
+            merged_events: None,
+        });
+    }
+    let event_ids = register(writer, event_channel_specs())?;
+    let mut annotations = Vec::new();
+    for (name, topic) in names.iter().zip(&topics) {
+        let mut pairs_spec = pairs_channel_spec();
+        pairs_spec.topic = sensor_topic(name, PAIRS_TOPIC);
+        let pairs_channel = writer.add_own_channel(&pairs_spec)?;
+        let ids = register(writer, sensor_channel_specs(name))?;
+        let annotator = Annotator::new(
+            config.annotate.clone(),
+            &sensor_channel_ids(&ids, &event_ids),
+        )
+        .hold_events();
+        annotations.push(sensor(name, topic, annotator, pairs_channel));
+    }
+    Ok(Annotation {
+        sensors: annotations,
+        merged_events: Some(EventWriter::new(&event_ids)),
+    })
+}
+
+/// What the pairing stage saw.
+pub(crate) struct PairingOutcome {
+    pub(super) decoded: DecodedCounts,
+    /// The first sensor's pairing figures (the only one's, most often).
+    pub(super) stats: PairingStats,
+    pub(super) pairs_written: u64,
+    pub(super) bad: BadMessages,
+    pub(super) warnings: Vec<String>,
+    /// Summed over the sensors.
+    pub(super) annotation: AnnotateStats,
+    /// One list for the log (with several LiDARs, the sensors' merged).
+    pub(super) events: Vec<NearMissEvent>,
+    /// Per sensor, with several LiDARs (empty with one).
+    pub(super) sensors: Vec<SensorOutcome>,
+}
+
+/// One sensor's figures on a log with several LiDARs.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SensorOutcome {
+    /// Its name in our channels' topics (`/looming/<name>/points`).
+    pub name: String,
+    pub topic: String,
+    pub pairs_written: u64,
+    pub pairing: PairingStats,
+    pub annotation: AnnotateStats,
+    /// The vehicle frame its events were merged in; absent when no
+    /// transform relates it to the vehicle (its events stand alone).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle_frame: Option<String>,
+}
+
+/// The pairing stage's figures at the end of the log.
+pub(super) fn outcome(
+    stage: &SensorPairing,
+    annotation: Option<&Annotation>,
+    events: Vec<NearMissEvent>,
+) -> PairingOutcome {
+    let stages = stage.stages();
+    let several = stages.len() > 1;
+    let mut warnings = Vec::new();
+    for (k, sensor_stage) in stages.iter().enumerate() {
+        let topic = annotation
+            .and_then(|a| a.sensors.get(k))
+            .map(|s| s.topic.as_str());
+        for warning in &sensor_stage.warnings {
+            warnings.push(match topic {
+                Some(topic) if several => format!("{topic}: {warning}"),
+                _ => warning.clone(),
+            });
+        }
+    }
+    let mut stats = AnnotateStats::default();
+    let mut sensors = Vec::new();
+    for (k, sensor) in annotation
+        .map_or(&[][..], |a| &a.sensors[..])
+        .iter()
+        .enumerate()
+    {
+        stats.absorb(sensor.annotator.stats());
+        if several {
+            sensors.push(SensorOutcome {
+                name: sensor.name.clone(),
+                topic: sensor.topic.clone(),
+                pairs_written: sensor.pairs_written,
+                pairing: stages[k].stats().clone(),
+                annotation: sensor.annotator.stats().clone(),
+                vehicle_frame: sensor.vehicle_from_sensor.as_ref().map(|v| v.0.clone()),
+            });
+        }
+    }
+    stats.events = events.len() as u64;
+    PairingOutcome {
+        stats: stages
+            .first()
+            .map(|s| s.stats().clone())
+            .unwrap_or_default(),
+        decoded: stage.decoded(),
+        pairs_written: annotation.map_or(0, |a| a.sensors.iter().map(|s| s.pairs_written).sum()),
+        bad: stage.bad.clone(),
+        warnings,
+        annotation: stats,
+        events,
+        sensors,
+    }
+}
+
+impl Annotation {
+    /// Send the pairers' pairs on, annotated by their sensor's annotator;
+    /// false when the writer has gone.
+    pub(super) fn emit(
+        &mut self,
+        pairs: Vec<(usize, ScanPair)>,
+        tx: &SyncSender<ToWriter>,
+    ) -> bool {
+        for (sensor, pair) in pairs {
+            let Some(sensor) = self.sensors.get_mut(sensor) else {
+                continue;
+            };
+            if !sensor.emit(&pair, tx) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// End of the log: the events still open, and with several LiDARs all
+    /// the sensors' events merged into one list and written. The log's events.
+    pub(super) fn finish(&mut self, tx: &SyncSender<ToWriter>) -> Vec<NearMissEvent> {
+        for sensor in &mut self.sensors {
+            for message in sensor.annotator.finish() {
+                if tx.send(ToWriter::Own(message)).is_err() {
+                    return Vec::new();
+                }
+            }
+        }
+        let Some(writer) = &mut self.merged_events else {
+            return self
+                .sensors
+                .first()
+                .map(|s| s.annotator.events().to_vec())
+                .unwrap_or_default();
+        };
+        let per_sensor: Vec<SensorEvents> = self
+            .sensors
+            .iter()
+            .map(|s| SensorEvents {
+                sensor: s.name.clone(),
+                vehicle_from_sensor: s.vehicle_from_sensor.clone(),
+                events: s.annotator.events().to_vec(),
+            })
+            .collect();
+        let events = merge_sensor_events(&per_sensor);
+        for event in &events {
+            for message in writer.messages(event) {
+                if tx.send(ToWriter::Own(message)).is_err() {
+                    return events;
+                }
+            }
+        }
+        events
+    }
+}
+
+impl SensorAnnotation {
+    /// Annotate one pair and send its messages; false when the writer has gone.
+    fn emit(&mut self, pair: &ScanPair, tx: &SyncSender<ToWriter>) -> bool {
+        if let Some(extrinsic) = pair
+            .motion
+            .velocity_extrinsic
+            .as_ref()
+            .or(pair.motion.imu_extrinsic.as_ref())
+            .filter(|e| e.source != ExtrinsicSource::IdentityAssumed)
+        {
+            self.vehicle_from_sensor =
+                Some((extrinsic.motion_frame.clone(), extrinsic.motion_from_lidar));
+        }
+        // The pair's quality figures come from its annotation; its
+        // record still goes out first.
+        let annotation = self.annotator.annotate(pair);
+        let mut record = PairRecord::from_pair(pair);
+        record.quality = self.annotator.take_quality();
+        let data = serde_json::to_vec(&record).expect("pair records always serialise");
+        let item = ToWriter::Own(OwnMessage {
+            channel_id: self.pairs_channel,
+            sequence: self.pairs_written as u32,
+            log_time_ns: pair.current_log_time_ns,
+            data,
+        });
+        self.pairs_written += 1;
+        if tx.send(item).is_err() {
+            return false;
+        }
+        annotation
+            .into_iter()
+            .all(|message| tx.send(ToWriter::Own(message)).is_ok())
+    }
+}

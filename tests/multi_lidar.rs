@@ -1,0 +1,179 @@
+//! Vehicles with several LiDARs through the real CLI: every sensor annotated
+//! on its own channels (`/looming/<sensor>/...`), one list of near misses for
+//! the log, merged across the sensors that saw each one.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{looming_process, read_all, scratch, stderr, write};
+
+/// The committed cut-in with a second LiDAR topic, `/lidar_front/points`,
+/// carrying the same clouds (the case a new user met: two sensors).
+fn cut_in_with_two_lidars(dir: &Path) -> PathBuf {
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let bytes = common::with_channel_copy(
+        &std::fs::read(&input).unwrap(),
+        "/lidar/points",
+        "/lidar_front/points",
+    );
+    let path = dir.join("two-lidars.mcap");
+    write(&path, &bytes);
+    path
+}
+
+#[test]
+fn two_lidars_are_each_annotated_and_their_near_miss_is_one() {
+    let dir = scratch("multi-lidar");
+    let input = cut_in_with_two_lidars(&dir);
+    let out = dir.join("out.mcap");
+    let summary = dir.join("summary.json");
+    let run = looming_process(&input, &out, &["--json-summary", summary.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let contents = read_all(&std::fs::read(&out).unwrap());
+    let input_contents = read_all(&std::fs::read(&input).unwrap());
+    common::assert_all_input_messages_copied(&input_contents, &contents);
+    let scans = input_contents.topic_messages("/lidar/points").len();
+    for sensor in ["lidar", "lidar_front"] {
+        for channel in ["points", "pairs", "objects", "object_list", "image/fused"] {
+            let topic = format!("/looming/{sensor}/{channel}");
+            assert_eq!(
+                contents.topic_messages(&topic).len(),
+                scans - 1,
+                "{topic}: one per pair"
+            );
+        }
+    }
+    // No per-sensor copy of the log's event channels, and none unprefixed
+    // of the per-sensor ones.
+    assert!(contents.topic_messages("/looming/lidar/events").is_empty());
+    assert!(contents.topic_messages("/looming/points").is_empty());
+    // The same near miss seen by both: one event naming both sensors.
+    let events = contents.topic_messages("/looming/events");
+    assert_eq!(events.len(), 1, "one near miss for the vehicle");
+    let event: serde_json::Value = serde_json::from_slice(&events[0].data).unwrap();
+    assert_eq!(
+        event["sensors"],
+        serde_json::json!(["lidar", "lidar_front"])
+    );
+    assert!(event["sensor"].is_string(), "{event}");
+    let ttc = event["min_time_to_contact_s"].as_f64().unwrap();
+    assert!((0.7..1.3).contains(&ttc), "{ttc}");
+    assert_eq!(contents.topic_messages("/looming/near_misses").len(), 1);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&summary).unwrap()).unwrap();
+    let sensors = summary["sensors"].as_array().expect("a line per sensor");
+    assert_eq!(sensors.len(), 2);
+    for sensor in sensors {
+        assert_eq!(sensor["pairs_written"], scans as u64 - 1, "{sensor}");
+        assert_eq!(sensor["vehicle_frame"], "imu_link", "{sensor}");
+    }
+    assert_eq!(summary["events"].as_array().unwrap().len(), 1);
+    let text = String::from_utf8_lossy(&run.stderr);
+    assert!(text.contains("/lidar_front/points"), "{text}");
+}
+
+#[test]
+fn lidar_topic_takes_a_list_or_one() {
+    let dir = scratch("multi-lidar-choice");
+    let input = cut_in_with_two_lidars(&dir);
+    // One topic asked for: today's single-sensor output.
+    let one = dir.join("one.mcap");
+    let run = looming_process(&input, &one, &["--lidar-topic", "/lidar_front/points"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let contents = read_all(&std::fs::read(&one).unwrap());
+    assert!(!contents.topic_messages("/looming/points").is_empty());
+    let event: serde_json::Value =
+        serde_json::from_slice(&contents.topic_messages("/looming/events")[0].data).unwrap();
+    assert!(event.get("sensors").is_none(), "{event}");
+    // A list, and `all`.
+    for choice in ["/lidar/points,/lidar_front/points", "all"] {
+        let both = dir.join("both.mcap");
+        let run = looming_process(&input, &both, &["--lidar-topic", choice, "--force"]);
+        assert!(run.status.success(), "{choice}: {}", stderr(&run));
+        let contents = read_all(&std::fs::read(&both).unwrap());
+        assert!(
+            !contents
+                .topic_messages("/looming/lidar_front/points")
+                .is_empty()
+        );
+        assert!(!contents.topic_messages("/looming/lidar/points").is_empty());
+    }
+    // An unknown topic in the list is refused, naming the candidates.
+    let bad = dir.join("bad.mcap");
+    let run = looming_process(&input, &bad, &["--lidar-topic", "/lidar/points,/nope"]);
+    assert_eq!(run.status.code(), Some(2), "{}", stderr(&run));
+    assert!(stderr(&run).contains("/nope"), "{}", stderr(&run));
+}
+
+#[test]
+fn a_batch_mixing_one_and_two_lidar_logs_processes_both_with_each_sensors_trust() {
+    let dir = scratch("multi-lidar-batch");
+    let logs = dir.join("logs-in");
+    std::fs::create_dir_all(&logs).unwrap();
+    let two = cut_in_with_two_lidars(&dir);
+    std::fs::rename(&two, logs.join("two-lidars.mcap")).unwrap();
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap"),
+        logs.join("cut-in.mcap"),
+    )
+    .unwrap();
+    let out = dir.join("fleet");
+    let run = common::looming(&[
+        "batch",
+        logs.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let fleet: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("fleet.json")).unwrap()).unwrap();
+    let logs = fleet.as_array().expect("a list of logs");
+    assert_eq!(logs.len(), 2);
+    for log in logs {
+        assert_eq!(log["status"], "processed", "{log}");
+        assert_eq!(log["events"], 1, "{log}");
+        let sensors = log["quality"]["sensors"].as_array();
+        if log["input"].as_str().unwrap().ends_with("two-lidars.mcap") {
+            let sensors = sensors.expect("each sensor's trust");
+            assert_eq!(sensors.len(), 2, "{log}");
+            for sensor in sensors {
+                let trusted = sensor["trusted_fraction"].as_f64().unwrap();
+                assert!(trusted > 0.5, "{sensor}");
+            }
+        } else {
+            assert!(sensors.is_none(), "{log}");
+        }
+    }
+    // The near misses name their sensors; the pictures were drawn.
+    let lines = std::fs::read_to_string(out.join("near_misses.jsonl")).unwrap();
+    let rows: Vec<serde_json::Value> = lines
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    for row in &rows {
+        assert!(row["range_picture"].is_string(), "{row}");
+        if row["log"].as_str().unwrap().ends_with("two-lidars.mcap") {
+            assert_eq!(row["sensors"].as_array().unwrap().len(), 2, "{row}");
+        }
+    }
+    // The viewer layout of the two-LiDAR output shows both sensors.
+    let annotated = out.join("logs/two-lidars.mcap");
+    let layout = dir.join("layout.json");
+    let run = common::looming(&[
+        "layout",
+        annotated.to_str().unwrap(),
+        "-o",
+        layout.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let layout: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&layout).unwrap()).unwrap();
+    let topics = &layout["configById"]["3D!looming"]["topics"];
+    for sensor in ["lidar", "lidar_front"] {
+        assert_eq!(topics[format!("/looming/{sensor}/points")]["visible"], true);
+    }
+    assert_eq!(topics["/lidar_front/points"]["visible"], false);
+}
