@@ -2,7 +2,7 @@
 //! (`docs/quality.md`): ground patterns (split, offset, moving), missing
 //! figures, laser offsets, low trust.
 
-use super::report::{Diagnosis, GroundSides, QualityTotals};
+use super::report::{Diagnosis, GroundSides, QualityReport, QualityTotals};
 use super::text::signed;
 use super::{
     CONSISTENT_SHARE, GROUND_MOVING_LIMIT, GROUND_SIDE_THRESHOLD_PER_S, MIN_SIDE_CELLS,
@@ -200,4 +200,66 @@ fn low_trust(t: &QualityTotals) -> Option<Diagnosis> {
             ),
         }
     })
+}
+
+/// A sensor whose stamps sit this far from the other sensors' (log time
+/// minus header stamp, medians), or more, has its clock named, s.
+const SENSOR_CLOCK_OFFSET_S: f64 = 0.05;
+
+/// On a log with several LiDARs, what sets one sensor apart: its stamps off
+/// the others' (`sensor_clock`: a clock or a driver's stamping; its pairs
+/// meet the motion samples at the wrong time) and no transform to the
+/// vehicle (`sensor_extrinsic`, from `identity_assumed_pairs` per sensor:
+/// its looming ignores its mounting and its near misses are not merged).
+pub(super) fn diagnose_sensors(reports: &mut [QualityReport], identity_assumed_pairs: &[u64]) {
+    let offsets: Vec<Option<f64>> = reports.iter().map(stamp_offset_s).collect();
+    // The sensors' typical offset (the lower median: of two sensors, the one
+    // stamped later against its log time is named).
+    let typical = median_of(offsets.iter().flatten().copied().collect());
+    for k in 0..reports.len() {
+        let name = reports[k].sensor.clone().unwrap_or_default();
+        if let (Some(own), Some(typical)) = (offsets[k], typical)
+            && (own - typical).abs() >= SENSOR_CLOCK_OFFSET_S
+        {
+            reports[k].diagnoses.push(Diagnosis {
+                code: "sensor_clock".into(),
+                message: format!(
+                    "sensor {name}'s scans are stamped {:.0} ms off the other sensors' \
+                     (log time minus stamp {:.3} s against {:.3} s): its clock or its driver's \
+                     stamping is off, so its pairs meet the motion samples at the wrong time",
+                    (own - typical) * 1e3,
+                    own,
+                    typical
+                ),
+            });
+        }
+        let assumed = identity_assumed_pairs.get(k).copied().unwrap_or(0);
+        if assumed > 0 {
+            reports[k].diagnoses.push(Diagnosis {
+                code: "sensor_extrinsic".into(),
+                message: format!(
+                    "sensor {name} has no transform to the motion sources' frame in {assumed} \
+                     pairs (identity assumed): its mounting is ignored and its near misses \
+                     stand apart from the other sensors'; give its transform in /tf_static"
+                ),
+            });
+        }
+    }
+}
+
+/// The median of `log time - stamp` over a report's pairs, s.
+fn stamp_offset_s(report: &QualityReport) -> Option<f64> {
+    median_of(
+        report
+            .scans
+            .iter()
+            .map(|s| (s.log_time_ns as i128 - i128::from(s.stamp_ns)) as f64 * 1e-9)
+            .collect(),
+    )
+}
+
+/// The lower median.
+fn median_of(mut values: Vec<f64>) -> Option<f64> {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len().saturating_sub(1) / 2).copied()
 }

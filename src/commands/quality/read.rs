@@ -6,6 +6,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::QualityError;
+use super::diagnose::diagnose_sensors;
 use super::report::QualityReport;
 use super::totals::Builder;
 use crate::annotate::topics::{EVENTS_TOPIC, sensor_of_pairs_topic};
@@ -23,6 +24,29 @@ pub(super) struct PairMessage {
     pub(super) speed_mps: Option<f64>,
     #[serde(default)]
     pub(super) quality: Option<PairQuality>,
+    /// Where the extrinsics to the motion sources came from.
+    #[serde(default)]
+    pub(super) extrinsic: Option<ExtrinsicSeen>,
+}
+
+/// The pair record's `extrinsic`: `cli`, `tf_static`, `same_frame` or
+/// `identity_assumed` per motion source.
+#[derive(Debug, Default, Deserialize)]
+pub(super) struct ExtrinsicSeen {
+    #[serde(default)]
+    velocity: Option<String>,
+    #[serde(default)]
+    imu: Option<String>,
+}
+
+impl ExtrinsicSeen {
+    /// Neither source has a transform to the LiDAR: identity was assumed.
+    fn assumed(&self) -> bool {
+        let assumed = |s: &Option<String>| s.as_deref() == Some("identity_assumed");
+        (assumed(&self.velocity) || self.velocity.is_none())
+            && (assumed(&self.imu) || self.imu.is_none())
+            && (self.velocity.is_some() || self.imu.is_some())
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -80,29 +104,38 @@ pub fn read_sensor_qualities(path: &Path) -> Result<Vec<QualityReport>, QualityE
         .values()
         .find(|c| c.topic == EVENTS_TOPIC)
         .map(|c| c.id);
-    pairs_channels
-        .into_iter()
-        .map(|(sensor, pairs_channel)| {
-            let mut report = read_pairs(&input, &name, pairs_channel, events_channel)?;
-            report.sensor = sensor;
-            Ok(report)
-        })
-        .collect()
+    let mut reports = Vec::new();
+    let mut extrinsic_assumed = Vec::new();
+    for (sensor, pairs_channel) in pairs_channels {
+        let (mut report, assumed) = read_pairs(&input, &name, pairs_channel, events_channel)?;
+        report.sensor = sensor;
+        reports.push(report);
+        extrinsic_assumed.push(assumed);
+    }
+    if reports.len() > 1 {
+        diagnose_sensors(&mut reports, &extrinsic_assumed);
+    }
+    Ok(reports)
 }
 
-/// One pairs channel's figures.
+/// One pairs channel's figures, and how many of its pairs had no transform
+/// to their motion sources (identity assumed).
 fn read_pairs(
     input: &InputFile,
     name: &str,
     pairs_channel: u16,
     events_channel: Option<u16>,
-) -> Result<QualityReport, QualityError> {
+) -> Result<(QualityReport, u64), QualityError> {
     let mut builder = Builder::default();
     let mut events = 0u64;
+    let mut assumed = 0u64;
     read_json_channel(
         input,
         pairs_channel,
-        &mut |pair: PairMessage| builder.add(pair),
+        &mut |pair: PairMessage| {
+            assumed += u64::from(pair.extrinsic.as_ref().is_some_and(ExtrinsicSeen::assumed));
+            builder.add(pair);
+        },
         &mut |channel| events += u64::from(Some(channel) == events_channel),
     )?
     .map_err(|bad| QualityError::BadRecord {
@@ -111,5 +144,5 @@ fn read_pairs(
         reason: bad.reason,
     })?;
     builder.count_events(events);
-    Ok(builder.finish(name.to_owned()))
+    Ok((builder.finish(name.to_owned()), assumed))
 }

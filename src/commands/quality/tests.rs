@@ -39,6 +39,7 @@ fn pair(index: u64, left: f64, right: f64, trusted: u64) -> PairMessage {
         },
         speed_mps: Some(10.0),
         quality: Some(quality),
+        extrinsic: None,
     }
 }
 
@@ -175,4 +176,33 @@ fn layouts_are_read_from_the_pair_records_when_present() {
         layout_text(Some(&described)),
         "ring field `ring` (32 rings)"
     );
+}
+
+#[test]
+fn a_sensor_stamped_off_the_others_or_without_a_transform_is_named() {
+    // Three sensors; the third's stamps are 200 ms behind its log times.
+    let sensor = |name: &str, stamp_lag_ns: u64| {
+        let mut r = report(
+            (0..5)
+                .map(|i| {
+                    let mut p = pair(i, 0.004, -0.003, 90);
+                    p.current.log_time_ns = 1_000_000_000 + i * 100_000_000 + stamp_lag_ns;
+                    p.current.stamp_ns = 1_000_000_000 + i as i64 * 100_000_000;
+                    p
+                })
+                .collect(),
+        );
+        r.sensor = Some(name.into());
+        r
+    };
+    let mut reports = vec![
+        sensor("roof", 0),
+        sensor("left", 10_000_000),
+        sensor("right", 200_000_000),
+    ];
+    super::diagnose::diagnose_sensors(&mut reports, &[0, 0, 3]);
+    assert!(codes(&reports[0]).is_empty(), "{:?}", reports[0].diagnoses);
+    assert!(codes(&reports[1]).is_empty(), "{:?}", reports[1].diagnoses);
+    assert_eq!(codes(&reports[2]), ["sensor_clock", "sensor_extrinsic"]);
+    assert!(reports[2].diagnoses[0].message.contains("right"));
 }
