@@ -212,6 +212,14 @@ pub(crate) struct SynthArgs {
     /// firing-order, firing-order-sparse [default: the scenario's, ring-time].
     #[arg(long, value_name = "NAME", value_parser = clap::value_parser!(looming::synth::CloudLayout))]
     pub(crate) layout: Option<looming::synth::CloudLayout>,
+    /// LiDARs on the vehicle: 1 (the scenario's, on /lidar/points), 2 (the
+    /// scenario's as the roof LiDAR on /lidar_roof/points and a 32-beam 20 Hz
+    /// one on the left, /lidar_left/points) or 3 (and one on the right,
+    /// /lidar_right/points); replaces the scenario's extra_lidars
+    /// [default: the scenario's, 1]. --beams, --columns and --layout apply to
+    /// the roof LiDAR.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=3))]
+    pub(crate) lidars: Option<u8>,
     /// zstd level of the output chunks (1-22; higher is smaller and slower)
     /// [default: 3].
     #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]

@@ -329,6 +329,7 @@ fn synth(args: SynthArgs) -> Result<(), Failure> {
     let lidar = looming::synth::LidarOverrides {
         layout: args.layout,
         realism: None,
+        lidars: args.lidars,
     };
     let summary = looming::synth::synthesize_with(&options, &lidar).map_err(|error| {
         let usage = matches!(

@@ -2,12 +2,14 @@
 //!
 //! A scenario ([`scene`]) is simulated by a rolling-sweep LiDAR ([`sensor`]) ray
 //! cast ([`geometry`]) against a scene moving with exact kinematics
-//! ([`kinematics`]); `encode` turns the result into ROS 2 CDR messages and
-//! truth records, written with the same MCAP writer as `looming process`.
+//! ([`kinematics`]), or by several, each on its own ([`rig`]); `encode` turns
+//! the result into ROS 2 CDR messages and truth records, written with the
+//! same MCAP writer as `looming process`.
 
 mod encode;
 pub mod geometry;
 pub mod kinematics;
+pub mod rig;
 pub mod scene;
 pub mod sensor;
 mod truth;
@@ -37,11 +39,16 @@ pub struct SynthOptions {
     pub output_options: OutputOptions,
 }
 
-/// Overrides of the scenario's LiDAR beyond [`SynthOptions`] (`--layout`).
+/// Overrides of the scenario's LiDAR beyond [`SynthOptions`] (`--layout`,
+/// `--lidars`).
 #[derive(Debug, Clone, Default)]
 pub struct LidarOverrides {
     pub layout: Option<CloudLayout>,
     pub realism: Option<Realism>,
+    /// LiDARs on the vehicle (1 to 3): the scenario's (the roof one) and the
+    /// first `lidars - 1` of the `"left"`, `"right"` presets, replacing the
+    /// scenario's `extra_lidars` [default: the scenario's].
+    pub lidars: Option<u8>,
 }
 
 /// What a synth run made.
@@ -88,6 +95,16 @@ pub(crate) fn resolve_scenario_with(
     if let Some(columns) = options.columns {
         scenario.lidar.columns = columns;
     }
+    if let Some(lidars) = lidar.lidars {
+        if !(1..=3).contains(&lidars) {
+            return Err(ScenarioError::Invalid {
+                name: scenario.name.clone(),
+                what: format!("--lidars {lidars} must be 1, 2 or 3"),
+            }
+            .into());
+        }
+        scenario.extra_lidars = scene::ExtraLidar::presets_for(lidars);
+    }
     scenario.validate()?;
     if let Some(start_s) = options.start_s
         && !(start_s.is_finite() && start_s >= 0.0 && start_s < scenario.duration_s)
@@ -122,53 +139,71 @@ pub fn synthesize_with(
         ..options.output_options.clone()
     };
     let mut writer = OutputWriter::create(&options.output, &output_options, &Default::default())?;
-    let world = sensor::World::new(scenario.clone());
-    let first_scan = world.first_scan_at(options.start_s.unwrap_or(0.0));
-    let mut log = encode::SynthLog::new(&mut writer, &world, first_scan)?;
+    let start_s = options.start_s.unwrap_or(0.0);
+    let rig = rig::rig(&scenario, options.seed);
+    let schedule = rig::schedule(&rig, start_s);
+    let mut log = encode::SynthLog::new(&mut writer, &rig, rig::first_stamp_s(&rig, start_s))?;
     let mut sequenced = encode::SequencedWriter::new(&mut writer);
-    sequenced.write_metadata(&scenario, options.seed, options.start_s.unwrap_or(0.0))?;
+    sequenced.write_metadata(&scenario, options.seed, start_s)?;
     // Simulation and encoding on one thread, writing (zstd) on this one.
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<encode::Encoded>>(2);
     let (points, events) =
         std::thread::scope(|scope| -> Result<(u64, Vec<TruthEvent>), SynthError> {
-            let producer = scope.spawn(|| {
-                let mut events = truth::EventTracker::new(&scenario);
-                let mut points = 0;
-                for index in first_scan..world.scan_count() {
-                    let scan = world.scan(index, options.seed);
-                    points += scan.points.len() as u64;
-                    events.observe(&world, &scan);
-                    log.encode_interval(&world, &scan, options.seed);
-                    if tx.send(log.take()).is_err() {
-                        break;
-                    }
-                }
-                let events = events.finish(&world);
-                log.encode_events(&events);
-                let _ = tx.send(log.take());
-                drop(tx);
-                (points, events)
-            });
+            // `tx` moves into the producer: the channel closes when it ends.
+            let producer =
+                scope.spawn(|| simulate(&scenario, &rig, &schedule, &mut log, options.seed, tx));
             for batch in rx {
                 sequenced.write_all(batch)?;
             }
             producer
                 .join()
                 .map_err(|_| SynthError::Internal("the simulation thread panicked".into()))
-                .map(Ok)?
         })?;
     let messages = sequenced.messages_written();
     let output_bytes = writer.finish()?;
     Ok(SynthSummary {
         scenario: scenario.name.clone(),
         output: options.output.display().to_string(),
-        scans: world.scan_count().saturating_sub(first_scan),
+        scans: schedule.len() as u64,
         points,
         messages,
         events,
         output_bytes,
         elapsed_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// Simulate and encode the scans of `schedule` (LiDAR, scan index) in order,
+/// each batch of messages to `tx`, then the planted near misses: the points
+/// written and the events. The events are the vehicle's, timed from the roof
+/// LiDAR's truth (the first of the rig: it sees all around).
+fn simulate(
+    scenario: &Scenario,
+    rig: &[rig::RigLidar],
+    schedule: &[(usize, u64)],
+    log: &mut encode::SynthLog,
+    seed: u64,
+    tx: std::sync::mpsc::SyncSender<Vec<encode::Encoded>>,
+) -> (u64, Vec<TruthEvent>) {
+    let roof = &rig[0].world;
+    let mut events = truth::EventTracker::new(scenario);
+    let mut points = 0;
+    for &(k, index) in schedule {
+        let lidar = &rig[k];
+        let scan = lidar.world.scan(index, lidar.seed);
+        points += scan.points.len() as u64;
+        if k == 0 {
+            events.observe(roof, &scan);
+        }
+        log.encode_interval(roof, (k, lidar), &scan, seed);
+        if tx.send(log.take()).is_err() {
+            break;
+        }
+    }
+    let events = events.finish(roof);
+    log.encode_events(&events);
+    let _ = tx.send(log.take());
+    (points, events)
 }
 
 /// A scan pair straight from the simulator, with the exact LiDAR motion as its

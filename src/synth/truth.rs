@@ -42,7 +42,13 @@ pub struct TruthActor {
 }
 
 impl TruthScan {
+    /// The truth of a scan of the (only) LiDAR, frame `lidar`.
     pub fn new(world: &World, scan: &SimScan) -> Self {
+        Self::of_lidar(world, scan, super::encode::LIDAR_FRAME)
+    }
+
+    /// The truth of a scan of the LiDAR with frame `lidar_frame`.
+    pub fn of_lidar(world: &World, scan: &SimScan, lidar_frame: &str) -> Self {
         let ego = world.track.state(scan.stamp_s);
         let lidar = world.lidar_state(scan.stamp_s);
         let velocity = lidar.to_lidar(&lidar.velocity_world_mps);
@@ -55,7 +61,7 @@ impl TruthScan {
             scan_index: scan.index,
             stamp_ns: stamp_ns(scan.stamp_s),
             period_s: world.period_s,
-            lidar_frame: super::encode::LIDAR_FRAME.into(),
+            lidar_frame: lidar_frame.into(),
             ego_position_m: ego.position_m.into(),
             ego_yaw_rad: ego.yaw_rad,
             ego_speed_mps: ego.speed_mps,

@@ -5,7 +5,7 @@ use crate::ros::msgs::{Header, PointCloud2, PointField, datatype, pointcloud2_fr
 use crate::synth::scene::CloudLayout;
 use crate::synth::sensor::{SimPoint, SimScan, World};
 
-use super::{CloudShape, LIDAR_FRAME, Slot, stamp_ns};
+use super::{CloudShape, Slot, stamp_ns};
 
 /// Builds a point layout field by field (each field aligned to its size).
 struct Packer {
@@ -68,15 +68,16 @@ fn put_f32(out: &mut [u8], offset: usize, value: f32) {
     out[offset..offset + 4].copy_from_slice(&value.to_le_bytes());
 }
 
-/// `/lidar/points` in the scenario's layout.
+/// `/lidar/points` in the scenario's layout, in frame `frame`.
 pub(super) fn lidar_cloud(
     world: &World,
     scan: &SimScan,
     shape: &CloudShape,
+    frame: &str,
 ) -> PointCloud2<'static> {
     let layout = world.scenario.lidar.layout;
     if layout == CloudLayout::RingTime {
-        return ring_time_cloud(scan);
+        return ring_time_cloud(scan, frame);
     }
     let (packer, offsets, point_step) = LidarFields::of(layout);
     let ps = point_step as usize;
@@ -85,7 +86,7 @@ pub(super) fn lidar_cloud(
         offsets.write_point(out, world, scan, shape, slot);
     }
     PointCloud2 {
-        header: Header::new(stamp_ns(scan.stamp_s), LIDAR_FRAME),
+        header: Header::new(stamp_ns(scan.stamp_s), frame),
         height: shape.height,
         width: shape.width,
         fields: packer.fields,
@@ -220,14 +221,14 @@ fn range_m(point: Option<&SimPoint>) -> f64 {
 }
 
 /// The Velodyne-driver cloud of `ring-time` (as before layouts existed).
-fn ring_time_cloud(scan: &SimScan) -> PointCloud2<'static> {
+fn ring_time_cloud(scan: &SimScan, frame: &str) -> PointCloud2<'static> {
     let points: Vec<[f32; 3]> = scan.points.iter().map(|p| p.point_m).collect();
     let intensity: Vec<f32> = scan.points.iter().map(|p| p.intensity).collect();
     let ring: Vec<u16> = scan.points.iter().map(|p| p.ring).collect();
     let time: Vec<f32> = scan.points.iter().map(|p| p.time_s).collect();
     pointcloud2_from_points(
         stamp_ns(scan.stamp_s),
-        LIDAR_FRAME,
+        frame,
         &points,
         Some(&intensity),
         Some(&ring),

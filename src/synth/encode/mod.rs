@@ -13,6 +13,7 @@ mod writer;
 use crate::output::{OutputError, OutputWriter, OwnChannelSpec};
 use crate::ros::schemas::{self as ros_schemas, RosDialect};
 
+use super::rig::RigLidar;
 use super::sensor::{SimScan, World};
 use super::truth::{TruthEvent, TruthScan};
 
@@ -47,70 +48,90 @@ pub fn stamp_ns(t_s: f64) -> i64 {
     START_NS + (t_s * 1e9).round() as i64
 }
 
+/// The ids of one LiDAR's channels.
+struct LidarChannels {
+    lidar: u16,
+    truth_points: u16,
+    truth_scan: u16,
+}
+
 /// The ids of a synthetic log's channels, one per topic.
 struct Channels {
-    lidar: u16,
+    /// Per LiDAR of the rig, in its order.
+    lidars: Vec<LidarChannels>,
     imu: u16,
     twist: u16,
     odometry: u16,
     tf_static: u16,
-    truth_points: u16,
-    truth_scan: u16,
     truth_events: u16,
 }
 
 impl Channels {
-    /// Register every channel of a synthetic log with `writer`.
-    fn register(writer: &mut OutputWriter) -> Result<Self, OutputError> {
+    /// Register every channel of a synthetic log with `writer`: the LiDARs'
+    /// clouds, the motion and `/tf_static`, the LiDARs' truth, the events.
+    fn register(writer: &mut OutputWriter, rig: &[RigLidar]) -> Result<Self, OutputError> {
         let d = RosDialect::Ros2;
         let mut add = |spec: OwnChannelSpec| writer.add_own_channel(&spec);
+        let cloud = |topic: &str| {
+            OwnChannelSpec::ros2(
+                topic,
+                "sensor_msgs",
+                "PointCloud2",
+                ros_schemas::point_cloud2(d),
+            )
+        };
+        let clouds: Vec<u16> = rig
+            .iter()
+            .map(|lidar| add(cloud(&lidar.topic)))
+            .collect::<Result<_, _>>()?;
+        let imu = add(OwnChannelSpec::ros2(
+            topics::IMU,
+            "sensor_msgs",
+            "Imu",
+            ros_schemas::imu(d),
+        ))?;
+        let twist = add(OwnChannelSpec::ros2(
+            topics::TWIST,
+            "geometry_msgs",
+            "TwistStamped",
+            ros_schemas::twist_stamped(d),
+        ))?;
+        let odometry = add(OwnChannelSpec::ros2(
+            topics::ODOMETRY,
+            "nav_msgs",
+            "Odometry",
+            ros_schemas::odometry(d),
+        ))?;
+        let tf_static = add(OwnChannelSpec::ros2(
+            topics::TF_STATIC,
+            "tf2_msgs",
+            "TFMessage",
+            ros_schemas::tf_message(d),
+        ))?;
+        let mut lidars = Vec::with_capacity(rig.len());
+        for (lidar, cloud_id) in rig.iter().zip(clouds) {
+            lidars.push(LidarChannels {
+                lidar: cloud_id,
+                truth_points: add(cloud(&lidar.truth_points_topic))?,
+                truth_scan: add(OwnChannelSpec::json(
+                    &lidar.truth_scan_topic,
+                    "looming.TruthScan",
+                    include_str!("../../../schemas/looming.TruthScan.schema.json"),
+                ))?,
+            });
+        }
+        let truth_events = add(OwnChannelSpec::json(
+            topics::TRUTH_EVENTS,
+            "looming.TruthEvent",
+            include_str!("../../../schemas/looming.TruthEvent.schema.json"),
+        ))?;
         Ok(Self {
-            lidar: add(OwnChannelSpec::ros2(
-                topics::LIDAR,
-                "sensor_msgs",
-                "PointCloud2",
-                ros_schemas::point_cloud2(d),
-            ))?,
-            imu: add(OwnChannelSpec::ros2(
-                topics::IMU,
-                "sensor_msgs",
-                "Imu",
-                ros_schemas::imu(d),
-            ))?,
-            twist: add(OwnChannelSpec::ros2(
-                topics::TWIST,
-                "geometry_msgs",
-                "TwistStamped",
-                ros_schemas::twist_stamped(d),
-            ))?,
-            odometry: add(OwnChannelSpec::ros2(
-                topics::ODOMETRY,
-                "nav_msgs",
-                "Odometry",
-                ros_schemas::odometry(d),
-            ))?,
-            tf_static: add(OwnChannelSpec::ros2(
-                topics::TF_STATIC,
-                "tf2_msgs",
-                "TFMessage",
-                ros_schemas::tf_message(d),
-            ))?,
-            truth_points: add(OwnChannelSpec::ros2(
-                topics::TRUTH_POINTS,
-                "sensor_msgs",
-                "PointCloud2",
-                ros_schemas::point_cloud2(d),
-            ))?,
-            truth_scan: add(OwnChannelSpec::json(
-                topics::TRUTH_SCAN,
-                "looming.TruthScan",
-                include_str!("../../../schemas/looming.TruthScan.schema.json"),
-            ))?,
-            truth_events: add(OwnChannelSpec::json(
-                topics::TRUTH_EVENTS,
-                "looming.TruthEvent",
-                include_str!("../../../schemas/looming.TruthEvent.schema.json"),
-            ))?,
+            lidars,
+            imu,
+            twist,
+            odometry,
+            tf_static,
+            truth_events,
         })
     }
 }
@@ -135,14 +156,16 @@ pub(crate) struct SynthLog {
 }
 
 impl SynthLog {
-    /// Register the channels and queue `/tf_static`; messages start with scan `first_scan`.
+    /// Register the channels of `rig` and queue `/tf_static`; messages start
+    /// at `start_s` (the first scan's start). The motion is the roof LiDAR's
+    /// world's.
     pub fn new(
         writer: &mut OutputWriter,
-        world: &World,
-        first_scan: u64,
+        rig: &[RigLidar],
+        start_s: f64,
     ) -> Result<Self, OutputError> {
-        let channels = Channels::register(writer)?;
-        let start_s = first_scan as f64 * world.period_s;
+        let channels = Channels::register(writer, rig)?;
+        let world = &rig[0].world;
         let first_index = |rate_hz: f64| (start_s * rate_hz - 1e-9).ceil().max(0.0) as u64;
         let mut log = Self {
             channels,
@@ -151,7 +174,7 @@ impl SynthLog {
             velocity_index: first_index(world.scenario.velocity_rate_hz),
             pending: Vec::new(),
         };
-        let tf = tf_static(world, start_s);
+        let tf = tf_static(rig, start_s);
         log.push(
             log.channels.tf_static,
             stamp_ns(start_s),
@@ -173,25 +196,38 @@ impl SynthLog {
         std::mem::take(&mut self.pending)
     }
 
-    /// Motion messages stamped before the end of `scan`'s sweep, then the scan
-    /// and its truth, published when the sweep ends.
-    pub fn encode_interval(&mut self, world: &World, scan: &SimScan, seed: u64) {
+    /// Motion messages (of `motion`, the roof LiDAR's world) stamped before
+    /// the end of `scan`'s sweep, then the scan of LiDAR `k` of the rig and
+    /// its truth, published when the sweep ends.
+    pub fn encode_interval(
+        &mut self,
+        motion: &World,
+        (k, lidar): (usize, &RigLidar),
+        scan: &SimScan,
+        seed: u64,
+    ) {
+        let world = &lidar.world;
         let sweep_end_s = scan.stamp_s + world.period_s;
-        self.encode_motion_until(world, sweep_end_s, seed);
+        self.encode_motion_until(motion, sweep_end_s, seed);
         let log_time_ns = stamp_ns(sweep_end_s);
         let shape = CloudShape::new(world, scan);
+        let channels = &self.channels.lidars[k];
+        let (cloud, truth_points, truth_scan) =
+            (channels.lidar, channels.truth_points, channels.truth_scan);
+        let frame = lidar.name.as_str();
         self.push(
-            self.channels.lidar,
+            cloud,
             log_time_ns,
-            lidar_cloud(world, scan, &shape).encode_cdr(false),
+            lidar_cloud(world, scan, &shape, frame).encode_cdr(false),
         );
         self.push(
-            self.channels.truth_points,
+            truth_points,
             log_time_ns,
-            truth_cloud(scan, &shape).encode_cdr(false),
+            truth_cloud(scan, &shape, frame).encode_cdr(false),
         );
-        let truth = serde_json::to_vec(&TruthScan::new(world, scan)).expect("truth serialises");
-        self.push(self.channels.truth_scan, log_time_ns, truth);
+        let truth =
+            serde_json::to_vec(&TruthScan::of_lidar(world, scan, frame)).expect("truth serialises");
+        self.push(truth_scan, log_time_ns, truth);
     }
 
     /// IMU, twist and odometry messages with stamps in [motion_until_s, until_s).

@@ -9,9 +9,10 @@ use crate::ros::msgs::{
     Header, Imu, Odometry, Pose, PoseWithCovariance, Quaternion, TFMessage, Transform,
     TransformStamped, Twist, TwistStamped, TwistWithCovariance, Vector3 as RosVector3,
 };
+use crate::synth::rig::RigLidar;
 use crate::synth::sensor::World;
 
-use super::{LIDAR_FRAME, ODOM_FRAME, VEHICLE_FRAME, stamp_ns};
+use super::{ODOM_FRAME, VEHICLE_FRAME, stamp_ns};
 
 /// `/imu/data` at `t_s`: gyro and specific force in the vehicle frame, with
 /// seeded Gaussian noise (a generator per sample index: order independent).
@@ -78,17 +79,22 @@ pub(super) fn velocity_messages(world: &World, t_s: f64) -> (TwistStamped, Odome
     )
 }
 
-/// `/tf_static`: the LiDAR mount in the vehicle/IMU frame.
-pub(super) fn tf_static(world: &World, start_s: f64) -> TFMessage {
-    let mount = &world.vehicle_from_lidar;
+/// `/tf_static`: the mount of each LiDAR of the rig in the vehicle/IMU frame.
+pub(super) fn tf_static(rig: &[RigLidar], start_s: f64) -> TFMessage {
     TFMessage {
-        transforms: vec![TransformStamped {
-            header: Header::new(stamp_ns(start_s), VEHICLE_FRAME),
-            child_frame_id: LIDAR_FRAME.into(),
-            transform: Transform {
-                translation: RosVector3::from(&mount.translation.vector),
-                rotation: Quaternion::from(&mount.rotation),
-            },
-        }],
+        transforms: rig
+            .iter()
+            .map(|lidar| {
+                let mount = &lidar.world.vehicle_from_lidar;
+                TransformStamped {
+                    header: Header::new(stamp_ns(start_s), VEHICLE_FRAME),
+                    child_frame_id: lidar.name.clone(),
+                    transform: Transform {
+                        translation: RosVector3::from(&mount.translation.vector),
+                        rotation: Quaternion::from(&mount.rotation),
+                    },
+                }
+            })
+            .collect(),
     }
 }

@@ -5,10 +5,10 @@ use crate::ros::msgs::{Header, PointCloud2};
 use crate::synth::sensor::{SimPoint, SimScan};
 use crate::truth::{self, TruthPoint};
 
-use super::{CloudShape, LIDAR_FRAME, stamp_ns};
+use super::{CloudShape, stamp_ns};
 
-/// The truth cloud of `scan` in the shape of its `/lidar/points`.
-pub(super) fn truth_cloud(scan: &SimScan, shape: &CloudShape) -> PointCloud2<'static> {
+/// The truth cloud of `scan` in the shape of its `/lidar/points`, in frame `frame`.
+pub(super) fn truth_cloud(scan: &SimScan, shape: &CloudShape, frame: &str) -> PointCloud2<'static> {
     let mut data = Vec::with_capacity(shape.slots.len() * truth::POINT_STEP as usize);
     for &slot in &shape.slots {
         let point = shape
@@ -17,7 +17,7 @@ pub(super) fn truth_cloud(scan: &SimScan, shape: &CloudShape) -> PointCloud2<'st
         data.extend_from_slice(&point.encode());
     }
     PointCloud2 {
-        header: Header::new(stamp_ns(scan.stamp_s), LIDAR_FRAME),
+        header: Header::new(stamp_ns(scan.stamp_s), frame),
         height: shape.height,
         width: shape.width,
         fields: truth::point_fields(),

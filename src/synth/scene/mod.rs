@@ -4,16 +4,19 @@
 //! embedded in the binary (`src/synth/scenarios/`), so they double as examples.
 //!
 //! The LiDAR's cloud layouts are in `layout.rs`, its imperfections in
-//! `realism.rs`, the checks serde cannot make in `validate.rs`.
+//! `realism.rs`, the LiDARs beside it in `rig.rs`, the checks serde cannot
+//! make in `validate.rs`.
 
 mod layout;
 mod realism;
+mod rig;
 mod validate;
 
 use serde::{Deserialize, Serialize};
 
 pub use layout::{CloudLayout, LAYOUT_NAMES, LaserOrder, RingField, RingFieldName};
 pub use realism::Realism;
+pub use rig::{ExtraLidar, PRESET_NAMES, ROOF_NAME};
 
 /// A whole scenario.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -37,6 +40,10 @@ pub struct Scenario {
     pub actors: Vec<Actor>,
     #[serde(default)]
     pub lidar: LidarSpec,
+    /// More LiDARs on the vehicle, each simulated on its own (docs/scenarios.md,
+    /// "Several LiDARs"); with any, `lidar` is the roof sensor `lidar_roof`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extra_lidars: Vec<ExtraLidar>,
     #[serde(default)]
     pub imu: ImuSpec,
     /// Rate of the TwistStamped and Odometry messages, Hz.

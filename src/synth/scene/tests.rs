@@ -90,3 +90,63 @@ fn bad_actor_motion_is_refused() {
         Err(ScenarioError::Invalid { .. })
     ));
 }
+
+#[test]
+fn extra_lidars_are_presets_or_objects() {
+    let text = r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}, "extra_lidars": [
+        "left",
+        {"name": "lidar_rear", "phase_s": 0.05,
+         "lidar": {"beams": 16, "rate_hz": 5, "mount_rpy_deg": [0, 0, 180]}}]}"#;
+    let scenario = parse("x", text).unwrap();
+    let [left, rear] = scenario.extra_lidars.as_slice() else {
+        panic!("two extra LiDARs expected");
+    };
+    assert_eq!(left, &ExtraLidar::preset("left").unwrap());
+    assert_eq!(
+        (
+            left.name.as_str(),
+            left.phase_s,
+            left.lidar.beams,
+            left.lidar.rate_hz
+        ),
+        ("lidar_left", 0.013, 32, 20.0)
+    );
+    assert_eq!((rear.name.as_str(), rear.lidar.beams), ("lidar_rear", 16));
+    assert_eq!(
+        rear.lidar.columns, 2048,
+        "the rest of `lidar` has its defaults"
+    );
+    // What is written back (objects) reads the same; none writes nothing.
+    let again: Scenario = serde_json::from_str(&serde_json::to_string(&scenario).unwrap()).unwrap();
+    assert_eq!(again, scenario);
+    let none = parse("x", r#"{"name": "x", "ego": {"speed_mps": [[0, 1]]}}"#).unwrap();
+    assert!(
+        !serde_json::to_string(&none)
+            .unwrap()
+            .contains("extra_lidars")
+    );
+    assert_eq!(ExtraLidar::presets_for(1), vec![]);
+    assert_eq!(ExtraLidar::presets_for(3).len(), 2);
+}
+
+#[test]
+fn bad_extra_lidars_are_refused() {
+    for bad in [
+        r#""middle""#,
+        r#"{"name": "lidar"}"#,
+        r#"{"name": "lidar_roof"}"#,
+        r#"{"name": "Left"}"#,
+        r#"{"name": "a/b"}"#,
+        r#"{"name": "x", "phase_s": 0.2}"#,
+        r#"{"name": "x", "phase_s": -0.01}"#,
+        r#"{"name": "x", "lidar": {"columns": 4}}"#,
+        r#"{"name": "x", "lidar": {"rate_hz": 0}}"#,
+        r#"{"name": "x", "colour": "red"}"#,
+        r#""left", "left""#,
+    ] {
+        let text = format!(
+            r#"{{"name": "x", "ego": {{"speed_mps": [[0, 1]]}}, "extra_lidars": [{bad}]}}"#
+        );
+        assert!(parse("x", &text).is_err(), "{bad}");
+    }
+}

@@ -1,12 +1,13 @@
 //! [`Scenario::validate`]: what serde cannot check.
 
-use super::{Profile, Scenario, ScenarioError, StaticObject};
+use super::{LidarSpec, Profile, ROOF_NAME, Scenario, ScenarioError, StaticObject};
 
 impl Scenario {
     /// Check what serde cannot: positive sizes and rates, actor motion given once.
     pub fn validate(&self) -> Result<(), ScenarioError> {
         self.check_rates()?;
-        self.check_lidar()?;
+        self.check_lidar_spec(&self.lidar, "lidar")?;
+        self.check_extra_lidars()?;
         self.check_ego_and_events()?;
         self.check_static_objects()?;
         self.check_actors()
@@ -36,24 +37,66 @@ impl Scenario {
         self.positive(self.velocity_rate_hz, "velocity_rate_hz")
     }
 
-    /// Beams, columns, elevations and the realism fractions.
-    fn check_lidar(&self) -> Result<(), ScenarioError> {
-        if self.lidar.beams < 1 || self.lidar.columns < 8 {
-            return Err(self.invalid("lidar needs at least 1 beam and 8 columns".into()));
+    /// Beams, columns, elevations and the realism fractions of the LiDAR
+    /// `what` (`lidar`, `extra_lidars[i].lidar`).
+    fn check_lidar_spec(&self, lidar: &LidarSpec, what: &str) -> Result<(), ScenarioError> {
+        if lidar.beams < 1 || lidar.columns < 8 {
+            return Err(self.invalid(format!("{what} needs at least 1 beam and 8 columns")));
         }
-        if self.lidar.elevation_min_deg >= self.lidar.elevation_max_deg && self.lidar.beams > 1 {
-            return Err(
-                self.invalid("lidar.elevation_min_deg must be below elevation_max_deg".into())
-            );
+        if lidar.elevation_min_deg >= lidar.elevation_max_deg && lidar.beams > 1 {
+            return Err(self.invalid(format!(
+                "{what}.elevation_min_deg must be below elevation_max_deg"
+            )));
         }
-        let realism = &self.lidar.realism;
-        for (value, what) in [
+        let realism = &lidar.realism;
+        for (value, field) in [
             (realism.dropout_fraction, "dropout_fraction"),
             (realism.speck_fraction, "speck_fraction"),
         ] {
             if !(0.0..=0.25).contains(&value) {
                 return Err(self.invalid(format!(
-                    "lidar.realism.{what} must be within 0 to 0.25, got {value}"
+                    "{what}.realism.{field} must be within 0 to 0.25, got {value}"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The LiDARs beside the roof one: names usable as frames and topics and
+    /// unique, rates, the spec, a phase within the first period.
+    fn check_extra_lidars(&self) -> Result<(), ScenarioError> {
+        let mut names = std::collections::BTreeSet::from(["lidar", ROOF_NAME]);
+        for (i, extra) in self.extra_lidars.iter().enumerate() {
+            let what = format!("extra_lidars[{i}]");
+            let name = extra.name.as_str();
+            let well_formed = name.len() <= 64
+                && name.starts_with(|c: char| c.is_ascii_lowercase())
+                && name
+                    .chars()
+                    .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+            if !well_formed {
+                return Err(self.invalid(format!(
+                    "{what}.name `{name}` must be lower-case letters, digits and `_`, \
+                     starting with a letter"
+                )));
+            }
+            if !names.insert(name) {
+                return Err(self.invalid(format!(
+                    "{what}.name `{name}` is taken (`lidar`, `{ROOF_NAME}` and every \
+                     extra LiDAR's name must differ)"
+                )));
+            }
+            self.positive(extra.lidar.rate_hz, &format!("{what}.lidar.rate_hz"))?;
+            self.positive(
+                extra.lidar.max_range_m,
+                &format!("{what}.lidar.max_range_m"),
+            )?;
+            self.check_lidar_spec(&extra.lidar, &format!("{what}.lidar"))?;
+            let period_s = 1.0 / extra.lidar.rate_hz;
+            if !(extra.phase_s.is_finite() && extra.phase_s >= 0.0 && extra.phase_s < period_s) {
+                return Err(self.invalid(format!(
+                    "{what}.phase_s must be within 0 to its period ({period_s} s), got {}",
+                    extra.phase_s
                 )));
             }
         }

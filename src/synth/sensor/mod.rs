@@ -118,6 +118,9 @@ pub struct World {
     /// The lasers, ring order (lowest first).
     pub lasers: Vec<Laser>,
     pub period_s: f64,
+    /// Start of scan 0, seconds from the start of the drive (0 unless the
+    /// LiDAR is one of several, phased against the roof's).
+    pub phase_s: f64,
 }
 
 impl World {
@@ -141,17 +144,39 @@ impl World {
             elevations_rad,
             lasers,
             period_s,
+            phase_s: 0.0,
+        }
+    }
+
+    /// The world of the same scene seen by another LiDAR, `lidar`, whose scan
+    /// 0 starts at `phase_s`.
+    pub fn for_lidar(scenario: &Scenario, lidar: &super::scene::LidarSpec, phase_s: f64) -> Self {
+        let mut scenario = scenario.clone();
+        scenario.lidar = lidar.clone();
+        scenario.extra_lidars.clear();
+        Self {
+            phase_s,
+            ..Self::new(scenario)
         }
     }
 
     /// Number of whole scans in the drive.
     pub fn scan_count(&self) -> u64 {
-        (self.scenario.duration_s / self.period_s + 1e-9).floor() as u64
+        ((self.scenario.duration_s - self.phase_s) / self.period_s + 1e-9)
+            .floor()
+            .max(0.0) as u64
     }
 
     /// The first scan starting at or after `start_s`.
     pub fn first_scan_at(&self, start_s: f64) -> u64 {
-        (start_s / self.period_s - 1e-9).ceil().max(0.0) as u64
+        ((start_s - self.phase_s) / self.period_s - 1e-9)
+            .ceil()
+            .max(0.0) as u64
+    }
+
+    /// Start of scan `index`, seconds from the start of the drive.
+    pub fn scan_stamp_s(&self, index: u64) -> f64 {
+        self.phase_s + index as f64 * self.period_s
     }
 
     pub fn lidar_state(&self, t_s: f64) -> LidarState {
@@ -253,7 +278,7 @@ impl World {
 
     /// Simulate scan `index` with noise from `seed`.
     pub fn scan(&self, index: u64, seed: u64) -> SimScan {
-        let stamp_s = index as f64 * self.period_s;
+        let stamp_s = self.scan_stamp_s(index);
         let columns: Vec<Vec<SimPoint>> = (0..self.scenario.lidar.columns)
             .into_par_iter()
             .map(|column| self.fire_column(stamp_s, column))
