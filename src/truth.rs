@@ -20,7 +20,7 @@ pub const EVENTS_TOPIC: &str = "/truth/events";
 
 /// The per-point truth topic of a LiDAR: [`POINTS_TOPIC`] on a drive with one
 /// LiDAR (`None`), `/truth/<sensor>/points` on a drive with several, `sensor`
-/// being the LiDAR's name ([`sensor_of_topic`]: `lidar_roof`, `lidar_left`, ...).
+/// being the LiDAR's name ([`crate::topics::sensor_name`] of its topic: `lidar_roof`, `lidar_left`, ...).
 pub fn points_topic(sensor: Option<&str>) -> String {
     sensor.map_or_else(|| POINTS_TOPIC.into(), |s| format!("/truth/{s}/points"))
 }
@@ -29,13 +29,6 @@ pub fn points_topic(sensor: Option<&str>) -> String {
 /// LiDAR (`None`), `/truth/<sensor>/scan` on a drive with several.
 pub fn scan_topic(sensor: Option<&str>) -> String {
     sensor.map_or_else(|| SCAN_TOPIC.into(), |s| format!("/truth/{s}/scan"))
-}
-
-/// The sensor name of a LiDAR topic: the topic without its leading `/` and
-/// trailing `/points` (`/lidar_left/points` -> `lidar_left`).
-pub fn sensor_of_topic(lidar_topic: &str) -> &str {
-    let name = lidar_topic.strip_prefix('/').unwrap_or(lidar_topic);
-    name.strip_suffix("/points").unwrap_or(name)
 }
 
 /// Bytes per `/truth/points` point.
@@ -273,10 +266,10 @@ mod tests {
     fn truth_topics_of_a_sensor() {
         assert_eq!(points_topic(None), POINTS_TOPIC);
         assert_eq!(scan_topic(None), SCAN_TOPIC);
-        let sensor = sensor_of_topic("/lidar_left/points");
+        let sensor = crate::topics::sensor_name("/lidar_left/points");
         assert_eq!(sensor, "lidar_left");
-        assert_eq!(points_topic(Some(sensor)), "/truth/lidar_left/points");
-        assert_eq!(scan_topic(Some(sensor)), "/truth/lidar_left/scan");
+        assert_eq!(points_topic(Some(&sensor)), "/truth/lidar_left/points");
+        assert_eq!(scan_topic(Some(&sensor)), "/truth/lidar_left/scan");
     }
 
     #[test]

@@ -91,7 +91,7 @@ fn three_lidars_each_with_its_rate_phase_rings_mount_and_truth() {
     } in RIG
     {
         let topic = format!("/{name}/points");
-        assert_eq!(looming::truth::sensor_of_topic(&topic), name);
+        assert_eq!(looming::topics::sensor_name(&topic), name);
         let clouds = clouds(&file, &topic);
         // 1 s: 10 roof scans (every 100 ms), 19 side scans (every 50 ms from 13 or 31 ms).
         let expected = if period_ns == 100_000_000 { 10 } else { 19 };

@@ -249,6 +249,20 @@ fn replay_error(error: ReplayError) -> EvalError {
     }
 }
 
+/// The truth channel of the LiDAR `scans` selects: on a drive with several
+/// LiDARs, `/truth/<sensor>/points`, else `/truth/points`.
+fn truth_channel_of(input: &InputFile, scans: &ScanOptions) -> Option<u16> {
+    let channels = &input.catalog().channels;
+    let find = |topic: &str| channels.values().find(|c| c.topic == topic).map(|c| c.id);
+    let sensor = crate::topics::select(input.catalog(), &scans.topics)
+        .ok()
+        .and_then(|selected| selected.lidar)
+        .map(|lidar| crate::topics::sensor_name(&lidar.topic));
+    sensor
+        .and_then(|sensor| find(&truth::points_topic(Some(&sensor))))
+        .or_else(|| find(&truth::points_topic(None)))
+}
+
 /// Truth from the log's own `/truth/points`: it arrives with its scan, before
 /// the pair that reports on it.
 fn own_truth(
@@ -257,12 +271,7 @@ fn own_truth(
     scans: &ScanOptions,
     state: &mut EvalState,
 ) -> Result<ReplayReport, EvalError> {
-    let truth_channel = input
-        .catalog()
-        .channels
-        .values()
-        .find(|c| c.topic == truth::POINTS_TOPIC)
-        .map(|c| c.id)
+    let truth_channel = truth_channel_of(input, scans)
         .ok_or_else(|| EvalError::NoTruth(path.display().to_string()))?;
     let truths = std::cell::RefCell::new(BTreeMap::<StampNs, ScanTruth>::new());
     let mut failure: Option<String> = None;
