@@ -6,7 +6,7 @@
 //! that `process` finds the sensor's origin:
 //! `cargo run --release --example reframe -- IN.mcap OUT.mcap X,Y,Z FRAME [SENSOR_FRAME]`
 //! (KITTI: `0.81,0.32,1.73 base_link velo_link`). Little-endian FLOAT32
-//! x, y, z fields only.
+//! x, y, z fields only. `DROP_TF=1` leaves the input's `/tf_static` out.
 
 use std::collections::BTreeMap;
 
@@ -24,14 +24,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(str::parse)
         .collect::<Result<_, _>>()?;
     let sensor_frame = rest.first();
+    // DROP_TF=1: the input's own /tf_static left out (the sensor's origin
+    // must then come from the geometry).
+    let drop_tf = std::env::var_os("DROP_TF").is_some();
     let bytes = std::fs::read(input)?;
     let mut writer = mcap::WriteOptions::new()
         .profile("ros2")
         .create(std::io::BufWriter::new(std::fs::File::create(output)?))?;
     let mut channels: BTreeMap<u16, u16> = BTreeMap::new();
     let mut first_stamp = None;
+    let mut first_log_time = u64::MAX;
     for message in mcap::MessageStream::new(&bytes)? {
         let message = message?;
+        if drop_tf && message.channel.topic.ends_with("tf_static") {
+            continue;
+        }
+        first_log_time = first_log_time.min(message.log_time);
         let channel = &message.channel;
         let id = match channels.get(&channel.id) {
             Some(id) => *id,
@@ -48,10 +56,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 id
             }
         };
-        let is_cloud = channel
-            .schema
-            .as_ref()
-            .is_some_and(|s| s.name.ends_with("PointCloud2"));
+        let is_cloud = !channel.topic.starts_with("/truth/")
+            && channel
+                .schema
+                .as_ref()
+                .is_some_and(|s| s.name.ends_with("PointCloud2"));
         let data = if is_cloud {
             let mut cloud = PointCloud2::decode_cdr(&message.data)?.into_owned();
             first_stamp.get_or_insert(cloud.header.stamp.to_ns());
@@ -72,7 +81,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         )?;
     }
     if let (Some(sensor_frame), Some(stamp_ns)) = (sensor_frame, first_stamp) {
-        write_tf_static(&mut writer, frame, sensor_frame, &offset, stamp_ns)?;
+        // Before the first cloud in log time, as a recorder latches it.
+        let log_time = first_log_time.saturating_sub(1);
+        write_tf_static(
+            &mut writer,
+            frame,
+            sensor_frame,
+            &offset,
+            (stamp_ns, log_time),
+        )?;
     }
     writer.finish()?;
     Ok(())
@@ -109,7 +126,7 @@ fn write_tf_static<W: std::io::Write + std::io::Seek>(
     frame: &str,
     sensor_frame: &str,
     offset: &[f32],
-    stamp_ns: i64,
+    (stamp_ns, log_time): (i64, u64),
 ) -> Result<(), Box<dyn std::error::Error>> {
     let dialect = looming::ros::schemas::RosDialect::Ros2;
     let schema_id = writer.add_schema(
@@ -142,7 +159,6 @@ fn write_tf_static<W: std::io::Write + std::io::Seek>(
             },
         }],
     };
-    let log_time = u64::try_from(stamp_ns).unwrap_or(0);
     writer.write_to_known_channel(
         &mcap::records::MessageHeader {
             channel_id: channel,

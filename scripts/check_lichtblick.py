@@ -51,6 +51,25 @@ def listed_topics(text):
     return rows
 
 
+def shooter(kit, shots, topics):
+    """The kit's shoot.py; for a log with more topics than its 1000-pixel
+    window shows in the Topics tab (about 25 rows: the list only draws the
+    rows in view, e.g. a log with three LiDARs), a copy with a window tall
+    enough to list them all."""
+    shoot = os.path.join(kit, "shoot.py")
+    if topics <= 25:
+        return shoot
+    height = 1000 + 60 * (topics - 25)
+    text = open(shoot).read()
+    tall = text.replace('"height": 1000', f'"height": {height}')
+    if tall == text:
+        return shoot
+    path = os.path.join(shots, "shoot-tall.py")
+    with open(path, "w") as f:
+        f.write(tall)
+    return path
+
+
 def check_shot(prefix, expected):
     alerts = open(f"{prefix}-alerts.txt").read()
     problems = []
@@ -89,7 +108,7 @@ for path in files:
             runs.append(("seek", iso(events[0]["start_log_time_ns"])))
         for label, at in runs:
             prefix = os.path.join(shots, f"{name}-{label}")
-            run(sys.executable, os.path.join(kit, "shoot.py"), str(port), os.path.basename(path), at, "25", prefix)
+            run(sys.executable, shooter(kit, shots, len(expected)), str(port), os.path.basename(path), at, "25", prefix)
             problems, listed = check_shot(prefix, expected)
             table.append((name, label, "none" if not problems else "PROBLEMS", listed, len(expected)))
             for problem in problems:

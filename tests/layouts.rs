@@ -27,22 +27,7 @@ const SLACK: f64 = 0.10;
 fn eval_layout(layout: &str) -> serde_json::Value {
     let dir = scratch(&format!("layouts-{}", layout.replace(':', "_")));
     let json = dir.join("eval.json");
-    let log = synth(
-        &dir,
-        "cut-in",
-        &[
-            "--start",
-            "2",
-            "--duration",
-            "4",
-            "--beams",
-            "32",
-            "--columns",
-            "512",
-            "--layout",
-            layout,
-        ],
-    );
+    let log = common::cut_in_window(&dir, "cut-in", &["--layout", layout]);
     let run = looming(&[
         "eval",
         log.to_str().unwrap(),

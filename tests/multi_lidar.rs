@@ -186,22 +186,7 @@ fn a_batch_mixing_one_and_two_lidar_logs_processes_both_with_each_sensors_trust(
 #[test]
 fn three_lidars_find_the_cut_in_once_with_each_sensor_as_accurate_as_alone() {
     let dir = scratch("three-lidars");
-    let input = common::synth(
-        &dir,
-        "cut-in",
-        &[
-            "--lidars",
-            "3",
-            "--start",
-            "2",
-            "--duration",
-            "4",
-            "--beams",
-            "32",
-            "--columns",
-            "512",
-        ],
-    );
+    let input = common::cut_in_window(&dir, "three-lidars", &["--lidars", "3"]);
     let out = dir.join("out.mcap");
     let run = looming_process(&input, &out, &[]);
     assert!(run.status.success(), "{}", stderr(&run));

@@ -6,7 +6,9 @@
 
 use serde::Serialize;
 
-use crate::model::{ExtrinsicInfo, RingSource, Scan, ScanLayout, ScanPair, TimeSource};
+use crate::model::{
+    ExtrinsicInfo, RingSource, Scan, ScanLayout, ScanPair, SensorOrigin, TimeSource,
+};
 use crate::output::OwnChannelSpec;
 use crate::quality::PairQuality;
 
@@ -61,6 +63,9 @@ pub struct LayoutRecord {
     pub times: String,
     /// The layout in words, as in the run summary.
     pub description: String,
+    /// Where the sensor is in the cloud's frame and how that was found.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<SensorOrigin>,
 }
 
 impl LayoutRecord {
@@ -70,6 +75,7 @@ impl LayoutRecord {
             ring_count: layout.ring_count,
             times: layout.times.kind().to_owned(),
             description: layout.to_string(),
+            origin: layout.origin.clone(),
         }
     }
 }

@@ -220,6 +220,11 @@ pub(crate) struct SynthArgs {
     /// the roof LiDAR.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=3))]
     pub(crate) lidars: Option<u8>,
+    /// The frame the clouds are published in: sensor (each LiDAR's own) or
+    /// vehicle (imu_link, the points moved by each LiDAR's mount, as Waymo,
+    /// Argoverse 2 or Autoware publish) [default: the scenario's, sensor].
+    #[arg(long, value_enum)]
+    pub(crate) frame: Option<looming::synth::CloudFrame>,
     /// zstd level of the output chunks (1-22; higher is smaller and slower)
     /// [default: 3].
     #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]
@@ -342,6 +347,13 @@ pub(crate) struct ScanArgs {
     /// unit quaternion); overrides /tf_static.
     #[arg(long, value_name = "X,Y,Z,QX,QY,QZ,QW", allow_hyphen_values = true)]
     pub(crate) extrinsic: Option<String>,
+    /// The LiDAR's frame, for clouds published in another (a vehicle or
+    /// world frame): the points are moved about that frame's origin, found
+    /// through /tf_static [default: the cloud's frame when its name says
+    /// LiDAR, else a LiDAR frame in /tf_static, else estimated from the
+    /// returns' rings; docs/channels.md].
+    #[arg(long, value_name = "FRAME")]
+    pub(crate) sensor_frame: Option<String>,
     /// Largest stamp gap between two scans that is still paired, seconds
     /// [default: 3 nominal scan periods].
     #[arg(long, value_name = "SECONDS")]

@@ -330,6 +330,7 @@ fn synth(args: SynthArgs) -> Result<(), Failure> {
         layout: args.layout,
         realism: None,
         lidars: args.lidars,
+        frame: args.frame,
     };
     let summary = looming::synth::synthesize_with(&options, &lidar).map_err(|error| {
         let usage = matches!(

@@ -77,6 +77,7 @@ pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
         pairing: PairingConfig {
             max_gap_s: args.max_gap,
             cli_extrinsic,
+            sensor_frame: args.sensor_frame.clone(),
             ..PairingConfig::default()
         },
         decode_limits: DecodeLimits {

@@ -21,7 +21,7 @@ use crate::output::{OutputError, OutputOptions, OutputWriter, check_overwrite};
 
 pub use encode::{CloudShape, Slot};
 pub use encode::{START_NS, topics};
-pub use scene::{CloudLayout, Realism, Scenario, ScenarioError};
+pub use scene::{CloudFrame, CloudLayout, Realism, Scenario, ScenarioError};
 pub use truth::{TruthEvent, TruthScan};
 
 /// What `looming synth` was asked for.
@@ -49,6 +49,9 @@ pub struct LidarOverrides {
     /// first `lidars - 1` of the `"left"`, `"right"` presets, replacing the
     /// scenario's `extra_lidars` [default: the scenario's].
     pub lidars: Option<u8>,
+    /// The frame the clouds are published in (`--frame`) [default: the
+    /// scenario's, the sensor's].
+    pub frame: Option<CloudFrame>,
 }
 
 /// What a synth run made.
@@ -82,6 +85,9 @@ pub(crate) fn resolve_scenario_with(
     let mut scenario = scene::load(&options.scenario)?;
     if let Some(layout) = lidar.layout {
         scenario.lidar.layout = layout;
+    }
+    if let Some(frame) = lidar.frame {
+        scenario.lidar.cloud_frame = frame;
     }
     if let Some(realism) = &lidar.realism {
         scenario.lidar.realism = realism.clone();

@@ -206,6 +206,32 @@ pub fn synth(dir: &Path, scenario: &str, extra: &[&str]) -> PathBuf {
     out
 }
 
+/// The cut-in's near-miss window (2-4 s) at 32 x 512, the resolution of
+/// most tests, in `DIR/NAME.mcap`, with `extra` synth options.
+pub fn cut_in_window(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(format!("{name}.mcap"));
+    let mut args = vec![
+        "synth",
+        "--scenario",
+        "cut-in",
+        "--start",
+        "2",
+        "--duration",
+        "4",
+        "--beams",
+        "32",
+        "--columns",
+        "512",
+        "-o",
+    ];
+    args.push(out.to_str().unwrap());
+    args.extend_from_slice(&["--force", "-q"]);
+    args.extend_from_slice(extra);
+    let run = looming(&args);
+    assert!(run.status.success(), "{name}: {}", stderr(&run));
+    out
+}
+
 /// Run `looming process INPUT -o OUTPUT EXTRA...`.
 pub fn looming_process(input: &Path, output: &Path, extra: &[&str]) -> Output {
     let mut args = vec![

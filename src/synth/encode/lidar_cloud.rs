@@ -98,6 +98,40 @@ pub(super) fn lidar_cloud(
     }
 }
 
+/// The cloud's points moved into the vehicle frame by the LiDAR's mount
+/// (`synth --frame vehicle`), stamped in that frame: what a stack that
+/// publishes in `base_link` records. Points without a return stay NaN.
+pub(super) fn into_vehicle_frame(
+    cloud: &mut PointCloud2<'static>,
+    vehicle_from_lidar: &nalgebra::Isometry3<f64>,
+) {
+    let offset = |name: &str| {
+        cloud
+            .fields
+            .iter()
+            .find(|f| f.name == name)
+            .map(|f| f.offset as usize)
+    };
+    let (Some(x), Some(y), Some(z)) = (offset("x"), offset("y"), offset("z")) else {
+        return;
+    };
+    let step = cloud.point_step as usize;
+    let read = |point: &[u8], at: usize| {
+        f32::from_le_bytes([point[at], point[at + 1], point[at + 2], point[at + 3]])
+    };
+    for point in cloud.data.to_mut().chunks_exact_mut(step) {
+        let p = [read(point, x), read(point, y), read(point, z)];
+        if !p.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        let q = vehicle_from_lidar * nalgebra::Point3::from(p.map(f64::from));
+        put_f32(point, x, q.x as f32);
+        put_f32(point, y, q.y as f32);
+        put_f32(point, z, q.z as f32);
+    }
+    cloud.header.frame_id = super::VEHICLE_FRAME.to_owned();
+}
+
 /// Byte offsets of a `/lidar/points` point's fields (`None`: the layout has
 /// no such field).
 struct LidarFields {

@@ -14,6 +14,7 @@ use crate::output::{OutputError, OutputWriter, OwnChannelSpec};
 use crate::ros::schemas::{self as ros_schemas, RosDialect};
 
 use super::rig::RigLidar;
+use super::scene::CloudFrame;
 use super::sensor::{SimScan, World};
 use super::truth::{TruthEvent, TruthScan};
 
@@ -215,11 +216,11 @@ impl SynthLog {
         let (cloud, truth_points, truth_scan) =
             (channels.lidar, channels.truth_points, channels.truth_scan);
         let frame = lidar.name.as_str();
-        self.push(
-            cloud,
-            log_time_ns,
-            lidar_cloud(world, scan, &shape, frame).encode_cdr(false),
-        );
+        let mut points = lidar_cloud(world, scan, &shape, frame);
+        if motion.scenario.lidar.cloud_frame == CloudFrame::Vehicle {
+            lidar_cloud::into_vehicle_frame(&mut points, &world.vehicle_from_lidar);
+        }
+        self.push(cloud, log_time_ns, points.encode_cdr(false));
         self.push(
             truth_points,
             log_time_ns,

@@ -156,10 +156,27 @@ pub struct LidarSpec {
     /// How the cloud is written (docs/scenarios.md, "Cloud layouts").
     #[serde(skip_serializing_if = "is_default")]
     pub layout: CloudLayout,
+    /// The frame the cloud's points are published in (docs/scenarios.md,
+    /// "Cloud frames"): the sensor's own (default) or the vehicle's.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub cloud_frame: CloudFrame,
     /// Sensor imperfections (docs/scenarios.md, "Sensor realism"): `"ideal"`,
     /// `"hdl64e"` or an object of the separate options.
     #[serde(skip_serializing_if = "is_default")]
     pub realism: Realism,
+}
+
+/// The frame a synthetic cloud is published in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum CloudFrame {
+    /// The LiDAR's frame (`lidar`, `lidar_left`, ...), as drivers publish.
+    #[default]
+    Sensor,
+    /// The vehicle frame `imu_link` (Waymo, Argoverse 2, Autoware's
+    /// `base_link`): the same points moved by the sensor's mount; `/tf_static`
+    /// still relates the two.
+    Vehicle,
 }
 
 fn is_default<T: Default + PartialEq>(value: &T) -> bool {
@@ -181,6 +198,7 @@ impl Default for LidarSpec {
             mount_xyz_m: [0.8, 0.1, 0.9],
             mount_rpy_deg: [0.0, -1.5, 4.0],
             layout: CloudLayout::RingTime,
+            cloud_frame: CloudFrame::Sensor,
             realism: Realism::default(),
         }
     }

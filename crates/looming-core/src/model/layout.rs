@@ -114,6 +114,9 @@ pub struct ScanLayout {
     /// Anything else worth knowing (e.g. organized rows that disagree with
     /// the ring field, which is then used).
     pub note: Option<String>,
+    /// Where the sensor is in the cloud's frame (`pairing::origin`); the
+    /// points were moved about it. `None` before pairing.
+    pub origin: Option<super::SensorOrigin>,
 }
 
 impl ScanLayout {
@@ -129,6 +132,7 @@ impl ScanLayout {
             }),
             ring_field_dropped: None,
             note: None,
+            origin: None,
         }
     }
 
@@ -183,6 +187,13 @@ impl fmt::Display for ScanLayout {
         }
         if let Some(note) = &self.note {
             write!(f, "; {note}")?;
+        }
+        if let Some(origin) = self
+            .origin
+            .as_ref()
+            .filter(|o| o.moves_points() || o.several_origins)
+        {
+            write!(f, "; sensor at {}", origin.describe())?;
         }
         Ok(())
     }

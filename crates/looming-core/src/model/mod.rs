@@ -5,6 +5,7 @@
 
 pub mod layout;
 pub mod motion;
+pub mod origin;
 pub mod pair;
 pub mod samples;
 pub mod scan;
@@ -14,6 +15,7 @@ pub use layout::{DroppedRingField, RingSource, Rotation, ScanLayout, TimeSource}
 pub use motion::{
     AngularSource, ExtrinsicInfo, ExtrinsicSource, MotionSample, PairMotion, TimeSeries,
 };
+pub use origin::{OriginSource, SensorOrigin};
 pub use pair::ScanPair;
 pub use samples::{Decoded, FrameTransform, ImuSample, VelocitySample, VelocitySourceKind};
 pub use scan::{Scan, StampNs};

@@ -41,6 +41,16 @@ impl TransformTree {
             .insert(child, (parent, transform.parent_from_child));
     }
 
+    /// Every frame the tree names, parents and children, sorted.
+    pub fn frames(&self) -> Vec<String> {
+        let mut frames: std::collections::BTreeSet<String> = std::collections::BTreeSet::new();
+        for (child, (parent, _)) in &self.parent_of {
+            frames.insert(child.clone());
+            frames.insert(parent.clone());
+        }
+        frames.into_iter().collect()
+    }
+
     /// Number of edges in the tree.
     pub fn len(&self) -> usize {
         self.parent_of.len()

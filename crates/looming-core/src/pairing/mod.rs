@@ -21,6 +21,7 @@
 mod buffer;
 pub mod frames;
 pub mod motion;
+pub mod origin;
 mod stats;
 
 use buffer::{InsertOutcome, SampleBuffer};
@@ -41,7 +42,7 @@ use crate::engine::layout;
 use crate::model::motion::seconds_to_ns;
 use crate::model::{
     Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan, ScanPair,
-    StampNs, VelocitySample,
+    SensorOrigin, StampNs, VelocitySample,
 };
 use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion};
 
@@ -84,6 +85,10 @@ pub struct PairingConfig {
     pub has_imu_source: bool,
     /// How far motion is held beyond the first/last sample, seconds.
     pub motion_hold_s: f64,
+    /// The sensor's frame (`--sensor-frame`), for clouds published in
+    /// another frame (`origin`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor_frame: Option<String>,
 }
 
 impl Default for PairingConfig {
@@ -95,6 +100,7 @@ impl Default for PairingConfig {
             has_velocity_source: false,
             has_imu_source: false,
             motion_hold_s: 0.2,
+            sensor_frame: None,
         }
     }
 }
@@ -166,6 +172,9 @@ pub struct ScanPairer {
     last_scan_stamp_ns: Option<StampNs>,
     /// Recent positive stamp differences of consecutive scans, seconds.
     recent_scan_dts_s: VecDeque<f64>,
+    /// Where the sensor is in its clouds' frame: found on the first scan
+    /// with points (`origin::locate`), kept for the log.
+    origin: Option<SensorOrigin>,
 }
 
 impl ScanPairer {
@@ -185,6 +194,7 @@ impl ScanPairer {
             stats: PairingStats::default(),
             last_scan_stamp_ns: None,
             recent_scan_dts_s: VecDeque::with_capacity(LAYOUT_PERIOD_WINDOW_LEN),
+            origin: None,
         }
     }
 
@@ -251,8 +261,12 @@ impl ScanPairer {
     pub fn push_decoded(&mut self, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
         match decoded {
             Decoded::Scan(mut scan) => {
+                let warnings = self.place_sensor(&mut scan);
                 self.complete_layout(&mut scan);
-                self.push_scan(log_time_ns, Arc::new(scan))
+                let mut events: Vec<PairEvent> =
+                    warnings.into_iter().map(PairEvent::Warning).collect();
+                events.extend(self.push_scan(log_time_ns, Arc::new(scan)));
+                events
             }
             Decoded::Imu(sample) => self.push_imu(log_time_ns, sample),
             Decoded::Velocity(sample) => self.push_velocity(log_time_ns, sample),
@@ -264,6 +278,25 @@ impl ScanPairer {
                 Vec::new()
             }
         }
+    }
+
+    /// Moves the scan's points about its sensor's origin, found on the first
+    /// scan with points ([`origin::locate`]); the warnings that finding gave.
+    pub fn place_sensor(&mut self, scan: &mut Scan) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if self.origin.is_none() && !scan.is_empty() {
+            let period_s = self.layout_period_s(scan.stamp_ns);
+            let sensor_frame = self.cfg.sensor_frame.as_deref();
+            let found;
+            (found, warnings) = origin::locate(scan, &self.transforms, sensor_frame, period_s);
+            self.stats.sensor_origin = Some(found.clone());
+            self.origin = Some(found);
+        }
+        if let Some(found) = &self.origin {
+            origin::apply(scan, found);
+            origin::record(scan, found);
+        }
+        warnings
     }
 
     /// Recovers the scan's rings and times (`engine::layout::complete`) with

@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::model::ScanLayout;
+use crate::model::{ScanLayout, SensorOrigin};
 
 /// What the pairer did, for the run report.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
@@ -40,4 +40,8 @@ pub struct PairingStats {
     pub layout_kinds: BTreeMap<String, u64>,
     /// Scans whose ring field was dropped (values that are not ring numbers).
     pub ring_fields_dropped: u64,
+    /// Where the sensor is in its clouds' frame and how that was found
+    /// (`origin`), from the first scan with points.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor_origin: Option<SensorOrigin>,
 }

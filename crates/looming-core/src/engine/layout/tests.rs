@@ -435,6 +435,7 @@ fn descriptions() {
         },
         ring_field_dropped: None,
         note: None,
+        origin: None,
     };
     assert_eq!(
         layout.to_string(),
