@@ -4,12 +4,14 @@
 # Outside CI (about a minute). Usage: scripts/accuracy.sh [BEAMS COLUMNS]
 # LIDARS=3 scripts/accuracy.sh 64 2048: the vehicle with three LiDARs (synth
 # --lidars 3; BEAMS x COLUMNS is the roof's, the side sensors 32 x 1024 at
-# 20 Hz), a row per sensor.
+# 20 Hz), a row per sensor. FRAME=vehicle|world: the clouds written in that
+# frame (synth --frame), for the sensor-origin check.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 beams=${1:-32}
 columns=${2:-512}
 lidars=${LIDARS:-1}
+frame=${FRAME:-sensor}
 if [ "$lidars" -gt 1 ]; then
   topics="/lidar_roof/points /lidar_left/points /lidar_right/points"
   topics=$(echo $topics | cut -d' ' -f1-"$lidars")
@@ -23,7 +25,7 @@ echo "| scenario (${beams} x ${columns}) | window s | pairs | L_lidar median / p
 echo "|---|---|---|---|---|---|---|---|"
 for spec in "straight-road 0 2" "urban-turn 0 2" "follow 0 2" "cut-in 2 4" "crossing 3 5" "safe-drive 0 3"; do
   set -- $spec
-  ./target/release/looming synth --scenario "$1" --start "$2" --duration "$3" --beams "$beams" --columns "$columns" --lidars "$lidars" -o "$out/$1.mcap" --force -q
+  ./target/release/looming synth --scenario "$1" --start "$2" --duration "$3" --beams "$beams" --columns "$columns" --lidars "$lidars" --frame "$frame" -o "$out/$1.mcap" --force -q
   for topic in $topics; do
   name="$1"
   if [ "$topic" = auto ]; then

@@ -111,3 +111,21 @@ fn a_sensor_frame_the_transforms_do_not_know_is_said_and_the_rings_decide() {
     assert!(text.contains("--sensor-frame nope"), "{text}");
     assert!(text.contains("/tf_static to lidar"), "{text}");
 }
+
+#[test]
+fn a_world_frame_cloud_finds_its_moving_sensor_through_tf_at_every_scan() {
+    let dir = scratch("origin-world");
+    let sensor = cut_in(&dir, "sensor");
+    let world = cut_in(&dir, "world");
+    let reference = fused_rmse(&dir, &sensor);
+    let found = summary(&dir, &world, &[]);
+    let origin = &found["pairing"]["sensor_origin"];
+    assert_eq!(origin["source"], "tf", "{origin}");
+    assert_eq!(origin["sensor_frame"], "lidar", "{origin}");
+    assert_one_near_miss(&found);
+    let moved = fused_rmse(&dir, &world);
+    assert!(
+        moved <= reference * 1.1,
+        "fused RMSE {moved} against {reference} in the sensor frame"
+    );
+}

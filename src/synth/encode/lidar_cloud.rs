@@ -98,12 +98,14 @@ pub(super) fn lidar_cloud(
     }
 }
 
-/// The cloud's points moved into the vehicle frame by the LiDAR's mount
-/// (`synth --frame vehicle`), stamped in that frame: what a stack that
-/// publishes in `base_link` records. Points without a return stay NaN.
-pub(super) fn into_vehicle_frame(
+/// The cloud's points moved into `frame` by `frame_from_lidar` (`synth
+/// --frame vehicle|world`), stamped in that frame: what a stack that
+/// publishes in `base_link`, or a recorder after a transform filter,
+/// records. Points without a return stay NaN.
+pub(super) fn into_frame(
     cloud: &mut PointCloud2<'static>,
-    vehicle_from_lidar: &nalgebra::Isometry3<f64>,
+    frame_from_lidar: &nalgebra::Isometry3<f64>,
+    frame: &str,
 ) {
     let offset = |name: &str| {
         cloud
@@ -124,12 +126,12 @@ pub(super) fn into_vehicle_frame(
         if !p.iter().all(|v| v.is_finite()) {
             continue;
         }
-        let q = vehicle_from_lidar * nalgebra::Point3::from(p.map(f64::from));
+        let q = frame_from_lidar * nalgebra::Point3::from(p.map(f64::from));
         put_f32(point, x, q.x as f32);
         put_f32(point, y, q.y as f32);
         put_f32(point, z, q.z as f32);
     }
-    cloud.header.frame_id = super::VEHICLE_FRAME.to_owned();
+    cloud.header.frame_id = frame.to_owned();
 }
 
 /// Byte offsets of a `/lidar/points` point's fields (`None`: the layout has

@@ -39,6 +39,7 @@ pub mod topics {
     pub const TWIST: &str = "/vehicle/twist";
     pub const ODOMETRY: &str = "/odom";
     pub const TF_STATIC: &str = "/tf_static";
+    pub const TF: &str = "/tf";
     pub const TRUTH_POINTS: &str = crate::truth::POINTS_TOPIC;
     pub const TRUTH_SCAN: &str = crate::truth::SCAN_TOPIC;
     pub const TRUTH_EVENTS: &str = crate::truth::EVENTS_TOPIC;
@@ -65,6 +66,8 @@ struct Channels {
     odometry: u16,
     tf_static: u16,
     truth_events: u16,
+    /// `/tf` (`odom -> imu_link`), for clouds in the world frame only.
+    tf: Option<u16>,
 }
 
 impl Channels {
@@ -126,6 +129,18 @@ impl Channels {
             "looming.TruthEvent",
             include_str!("../../../schemas/looming.TruthEvent.schema.json"),
         ))?;
+        // Last: the other channels keep their ids whatever the frame.
+        let world_frame = rig[0].world.scenario.lidar.cloud_frame == CloudFrame::World;
+        let tf = if world_frame {
+            Some(add(OwnChannelSpec::ros2(
+                topics::TF,
+                "tf2_msgs",
+                "TFMessage",
+                ros_schemas::tf_message(d),
+            ))?)
+        } else {
+            None
+        };
         Ok(Self {
             lidars,
             imu,
@@ -133,6 +148,7 @@ impl Channels {
             odometry,
             tf_static,
             truth_events,
+            tf,
         })
     }
 }
@@ -217,8 +233,16 @@ impl SynthLog {
             (channels.lidar, channels.truth_points, channels.truth_scan);
         let frame = lidar.name.as_str();
         let mut points = lidar_cloud(world, scan, &shape, frame);
-        if motion.scenario.lidar.cloud_frame == CloudFrame::Vehicle {
-            lidar_cloud::into_vehicle_frame(&mut points, &world.vehicle_from_lidar);
+        match motion.scenario.lidar.cloud_frame {
+            CloudFrame::Sensor => {}
+            CloudFrame::Vehicle => {
+                lidar_cloud::into_frame(&mut points, &world.vehicle_from_lidar, VEHICLE_FRAME);
+            }
+            CloudFrame::World => {
+                let world_from_vehicle = motion::world_from_vehicle(motion, scan.stamp_s);
+                let world_from_lidar = world_from_vehicle * world.vehicle_from_lidar;
+                lidar_cloud::into_frame(&mut points, &world_from_lidar, ODOM_FRAME);
+            }
         }
         self.push(cloud, log_time_ns, points.encode_cdr(false));
         self.push(
@@ -255,6 +279,10 @@ impl SynthLog {
                 let stamp = stamp_ns(next_velocity_s);
                 self.push(self.channels.twist, stamp, twist.encode_cdr(false));
                 self.push(self.channels.odometry, stamp, odometry.encode_cdr(false));
+                if let Some(tf) = self.channels.tf {
+                    let transform = motion::world_tf(world, next_velocity_s);
+                    self.push(tf, stamp, transform.encode_cdr(false));
+                }
                 self.velocity_index += 1;
             }
         }

@@ -79,6 +79,30 @@ pub(super) fn velocity_messages(world: &World, t_s: f64) -> (TwistStamped, Odome
     )
 }
 
+/// The vehicle's pose in the world frame at `t_s` (what `/odom` says).
+pub(super) fn world_from_vehicle(world: &World, t_s: f64) -> nalgebra::Isometry3<f64> {
+    let ego = world.track.state(t_s);
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::from(ego.position_m),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), ego.yaw_rad),
+    )
+}
+
+/// `/tf` at `t_s`: `odom -> imu_link`, the vehicle's pose in the world.
+pub(super) fn world_tf(world: &World, t_s: f64) -> TFMessage {
+    let pose = world_from_vehicle(world, t_s);
+    TFMessage {
+        transforms: vec![TransformStamped {
+            header: Header::new(stamp_ns(t_s), ODOM_FRAME),
+            child_frame_id: VEHICLE_FRAME.into(),
+            transform: Transform {
+                translation: RosVector3::from(&pose.translation.vector),
+                rotation: Quaternion::from(&pose.rotation),
+            },
+        }],
+    }
+}
+
 /// `/tf_static`: the mount of each LiDAR of the rig in the vehicle/IMU frame.
 pub(super) fn tf_static(rig: &[RigLidar], start_s: f64) -> TFMessage {
     TFMessage {

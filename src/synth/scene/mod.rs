@@ -177,6 +177,10 @@ pub enum CloudFrame {
     /// `base_link`): the same points moved by the sensor's mount; `/tf_static`
     /// still relates the two.
     Vehicle,
+    /// The world frame `odom` (PandaSet; a recorder after a transform
+    /// filter): each scan's points moved rigidly by the vehicle's pose at its
+    /// stamp and the mount; `/tf` carries `odom -> imu_link`.
+    World,
 }
 
 fn is_default<T: Default + PartialEq>(value: &T) -> bool {

@@ -16,6 +16,9 @@ pub enum OriginSource {
     SensorFrameOption,
     /// `/tf_static`, to a LiDAR frame connected to the cloud's.
     TfStatic,
+    /// `/tf` (with `/tf_static`): the cloud's frame moves (a world frame);
+    /// the sensor is looked up at every scan's stamp.
+    Tf,
     /// Estimated from the returns' elevations.
     Geometry,
 }
@@ -26,6 +29,7 @@ impl OriginSource {
             OriginSource::CloudFrame => "cloud_frame",
             OriginSource::SensorFrameOption => "sensor_frame_option",
             OriginSource::TfStatic => "tf_static",
+            OriginSource::Tf => "tf",
             OriginSource::Geometry => "geometry",
         }
     }
@@ -92,6 +96,10 @@ impl SensorOrigin {
             ),
             OriginSource::TfStatic => format!(
                 "/tf_static to {}",
+                self.sensor_frame.as_deref().unwrap_or("?")
+            ),
+            OriginSource::Tf => format!(
+                "/tf to {} at each scan's stamp",
                 self.sensor_frame.as_deref().unwrap_or("?")
             ),
             OriginSource::Geometry => "estimated from the returns' elevations".to_string(),

@@ -58,13 +58,22 @@ pub fn looks_like_lidar_frame(frame: &str) -> bool {
 /// Where `scan`'s sensor is (see the module's priorities; `period_s`, the
 /// scan period, lets the rings be found by the point order), and what the
 /// user should hear of it.
+///
+/// `tree` holds `/tf_static` and `/tf` at the scan's stamp, `statics` the
+/// static part: an origin only `/tf` reaches moves with the cloud's frame
+/// ([`OriginSource::Tf`], looked up again per scan with [`at_stamp`]).
 pub fn locate(
     scan: &Scan,
-    tree: &TransformTree,
+    (tree, statics): (&TransformTree, &TransformTree),
     sensor_frame: Option<&str>,
     period_s: f64,
 ) -> (SensorOrigin, Vec<String>) {
-    let (origin, warning) = find(scan, tree, sensor_frame, period_s);
+    let (mut origin, warning) = find(scan, tree, sensor_frame, period_s);
+    if let Some(frame) = &origin.sensor_frame
+        && statics.lookup(&scan.frame_id, frame).is_none()
+    {
+        origin.source = OriginSource::Tf;
+    }
     let mut warnings: Vec<String> = warning.into_iter().collect();
     if origin.several_origins {
         warnings.push(format!(
@@ -484,6 +493,24 @@ fn search(
         .filter_map(|o| Some((ring_objective(&in_sensor(sample, &o), Vector3::zeros())?, o)))
         .min_by(|a, b| a.0.total_cmp(&b.0).then(size(&a.1).total_cmp(&size(&b.1))))
         .map_or(centre, |(_, o)| o)
+}
+
+/// `found` (through `/tf`) at `scan`'s stamp, from `tree` (the transforms at
+/// that stamp); as found when `/tf` has no sample near the stamp.
+pub fn at_stamp(scan: &Scan, tree: &TransformTree, found: &SensorOrigin) -> SensorOrigin {
+    let Some(frame) = &found.sensor_frame else {
+        return found.clone();
+    };
+    match tree.lookup(&scan.frame_id, frame) {
+        Some(frame_from_sensor) => {
+            let mut origin = found.clone();
+            origin.cloud_from_sensor = scan.sensor_pose.inverse() * frame_from_sensor;
+            let t = origin.cloud_from_sensor.translation.vector;
+            origin.position_m = [t.x, t.y, t.z];
+            origin
+        }
+        None => found.clone(),
+    }
 }
 
 /// Move `scan`'s points into the sensor's frame and its pose with them, so
