@@ -26,7 +26,6 @@ pub mod origin;
 mod stats;
 
 use buffer::{InsertOutcome, SampleBuffer};
-use history::TransformHistory;
 pub use stats::PairingStats;
 
 use std::collections::{HashSet, VecDeque};
@@ -43,8 +42,8 @@ pub use frames::{
 use crate::engine::layout;
 use crate::model::motion::seconds_to_ns;
 use crate::model::{
-    Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, OriginSource, PairMotion,
-    Scan, ScanPair, SensorOrigin, StampNs, VelocitySample,
+    Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan, ScanPair,
+    StampNs, VelocitySample,
 };
 use motion::{GyroSample, MotionInputs, TwistSample, build_pair_motion};
 
@@ -165,8 +164,6 @@ pub struct ScanPairer {
     velocity: SampleBuffer<TwistSample>,
     imu: SampleBuffer<GyroSample>,
     transforms: TransformTree,
-    /// `/tf`'s recent transforms, for clouds in a moving frame.
-    history: TransformHistory,
     nominal_period_override_s: Option<f64>,
     accepted_dts_s: VecDeque<f64>,
     next_index: u64,
@@ -176,9 +173,8 @@ pub struct ScanPairer {
     last_scan_stamp_ns: Option<StampNs>,
     /// Recent positive stamp differences of consecutive scans, seconds.
     recent_scan_dts_s: VecDeque<f64>,
-    /// Where the sensor is in its clouds' frame: found on the first scan
-    /// with points (`origin::locate`), kept for the log.
-    origin: Option<SensorOrigin>,
+    /// Where the sensor is in its clouds' frame (`origin`), and `/tf`.
+    placement: origin::SensorPlacement,
 }
 
 impl ScanPairer {
@@ -191,7 +187,6 @@ impl ScanPairer {
             velocity: SampleBuffer::default(),
             imu: SampleBuffer::default(),
             transforms: TransformTree::new(),
-            history: TransformHistory::default(),
             nominal_period_override_s: None,
             accepted_dts_s: VecDeque::with_capacity(MEDIAN_WINDOW_LEN),
             next_index: 0,
@@ -199,7 +194,7 @@ impl ScanPairer {
             stats: PairingStats::default(),
             last_scan_stamp_ns: None,
             recent_scan_dts_s: VecDeque::with_capacity(LAYOUT_PERIOD_WINDOW_LEN),
-            origin: None,
+            placement: origin::SensorPlacement::default(),
         }
     }
 
@@ -288,31 +283,14 @@ impl ScanPairer {
     /// Moves the scan's points about its sensor's origin, found on the first
     /// scan with points ([`origin::locate`]); the warnings that finding gave.
     pub fn place_sensor(&mut self, scan: &mut Scan) -> Vec<String> {
-        let mut warnings = Vec::new();
-        if self.origin.is_none() && !scan.is_empty() {
-            let period_s = self.layout_period_s(scan.stamp_ns);
-            let sensor_frame = self.cfg.sensor_frame.as_deref();
-            let tree = self.history.tree_at(&self.transforms, scan.stamp_ns);
-            let found;
-            (found, warnings) =
-                origin::locate(scan, (&tree, &self.transforms), sensor_frame, period_s);
-            self.stats.sensor_origin = Some(found.clone());
-            self.origin = Some(found);
+        let period_s = self.layout_period_s(scan.stamp_ns);
+        let sensor_frame = self.cfg.sensor_frame.as_deref();
+        let (warnings, found) =
+            self.placement
+                .place(scan, &self.transforms, sensor_frame, period_s);
+        if found.is_some() {
+            self.stats.sensor_origin = found;
         }
-        let Some(found) = &self.origin else {
-            return warnings;
-        };
-        // Found through /tf: the cloud's frame moves; its sensor is looked
-        // up again at every scan's stamp.
-        let found = match found.source {
-            OriginSource::Tf => {
-                let tree = self.history.tree_at(&self.transforms, scan.stamp_ns);
-                origin::at_stamp(scan, &tree, found)
-            }
-            _ => found.clone(),
-        };
-        origin::apply(scan, &found);
-        origin::record(scan, &found);
         warnings
     }
 
@@ -359,7 +337,7 @@ impl ScanPairer {
     pub fn push_transforms(&mut self, transforms: &[FrameTransform], is_static: bool) {
         if !is_static {
             for transform in transforms {
-                self.history.insert(transform);
+                self.placement.keep_tf(transform);
             }
             return;
         }
@@ -594,22 +572,11 @@ impl ScanPairer {
         motion_frame: &str,
         events: &mut Vec<PairEvent>,
     ) -> ExtrinsicInfo {
-        // Points moved about a sensor frame a transform named: the extrinsic
-        // is that frame's (a world-frame cloud's own frame moves).
-        let sensor_frame = scan
-            .layout
-            .origin
-            .as_ref()
-            .and_then(|o| o.sensor_frame.as_deref())
-            .filter(|_| self.cfg.cli_extrinsic.is_none());
-        let (lidar_frame, pose) = match sensor_frame {
-            Some(frame) => (frame, Isometry3::identity()),
-            None => (scan.frame_id.as_str(), scan.sensor_pose),
-        };
+        let (lidar_frame, pose) = origin::extrinsic_frame(scan, self.cfg.cli_extrinsic.is_some());
         let info = resolve_extrinsic(
             &self.transforms,
             self.cfg.cli_extrinsic.as_ref(),
-            lidar_frame,
+            &lidar_frame,
             &pose,
             motion_frame,
         );

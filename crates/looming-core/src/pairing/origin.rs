@@ -29,7 +29,57 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::frames::{TransformTree, normalize_frame_id};
-use crate::model::{OriginSource, RingSource, Scan, SensorOrigin};
+use super::history::TransformHistory;
+use crate::model::{FrameTransform, OriginSource, RingSource, Scan, SensorOrigin};
+
+/// A sensor's origin over a log: found on its first scan with points, then
+/// applied to every scan (looked up again at each scan's stamp when only
+/// `/tf` reaches it).
+#[derive(Debug, Clone, Default)]
+pub struct SensorPlacement {
+    origin: Option<SensorOrigin>,
+    /// `/tf`'s recent transforms.
+    history: TransformHistory,
+}
+
+impl SensorPlacement {
+    /// Keep a `/tf` transform.
+    pub fn keep_tf(&mut self, transform: &FrameTransform) {
+        self.history.insert(transform);
+    }
+
+    /// Move `scan`'s points about its sensor (`statics`: `/tf_static`;
+    /// `period_s`: the scan period): the warnings, and the origin when this
+    /// scan found it.
+    pub fn place(
+        &mut self,
+        scan: &mut Scan,
+        statics: &TransformTree,
+        sensor_frame: Option<&str>,
+        period_s: f64,
+    ) -> (Vec<String>, Option<SensorOrigin>) {
+        let (mut warnings, mut found_now) = (Vec::new(), None);
+        if self.origin.is_none() && !scan.is_empty() {
+            let tree = self.history.tree_at(statics, scan.stamp_ns);
+            let found;
+            (found, warnings) = locate(scan, (&tree, statics), sensor_frame, period_s);
+            found_now = Some(found.clone());
+            self.origin = Some(found);
+        }
+        let Some(found) = &self.origin else {
+            return (warnings, found_now);
+        };
+        let found = match found.source {
+            OriginSource::Tf => {
+                at_stamp(scan, &self.history.tree_at(statics, scan.stamp_ns), found)
+            }
+            _ => found.clone(),
+        };
+        apply(scan, &found);
+        record(scan, &found);
+        (warnings, found_now)
+    }
+}
 
 /// Frame names that say LiDAR.
 const LIDAR_NAMES: [&str; 14] = [
@@ -495,6 +545,22 @@ fn search(
         .map_or(centre, |(_, o)| o)
 }
 
+/// The frame and pose the extrinsics to the motion sources start from: the
+/// sensor frame a transform named (a world-frame cloud's own frame moves),
+/// else the cloud's frame with its pose; the cloud's always with a
+/// command-line extrinsic (`cli`), which is read as that frame's pose.
+pub fn extrinsic_frame(scan: &Scan, cli: bool) -> (String, Isometry3<f64>) {
+    let named = scan
+        .layout
+        .origin
+        .as_ref()
+        .and_then(|o| o.sensor_frame.clone());
+    match named.filter(|_| !cli) {
+        Some(frame) => (frame, Isometry3::identity()),
+        None => (scan.frame_id.clone(), scan.sensor_pose),
+    }
+}
+
 /// `found` (through `/tf`) at `scan`'s stamp, from `tree` (the transforms at
 /// that stamp); as found when `/tf` has no sample near the stamp.
 pub fn at_stamp(scan: &Scan, tree: &TransformTree, found: &SensorOrigin) -> SensorOrigin {
@@ -531,4 +597,96 @@ pub fn apply(scan: &mut Scan, origin: &SensorOrigin) {
 /// Record `origin` in the scan's layout (after [`apply`]).
 pub fn record(scan: &mut Scan, origin: &SensorOrigin) {
     scan.layout.origin = Some(origin.clone());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ScanLayout;
+
+    /// A 16-laser sensor at `at` (level) seeing a box-shaped room and a
+    /// floor, its points in the cloud's frame `base_link` with a ring field.
+    fn sensor_points(at: [f64; 3], points: &mut Vec<[f32; 3]>, rings: &mut Vec<u16>) {
+        for laser in 0..16u16 {
+            let elevation = (-15.0 + 2.0 * f64::from(laser)).to_radians();
+            for k in 0..720 {
+                let azimuth = f64::from(k) * std::f64::consts::TAU / 720.0;
+                let (dx, dy, dz) = (
+                    elevation.cos() * azimuth.cos(),
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                );
+                // The nearer of the floor 1.8 m below and walls 12-20 m away.
+                let wall = 12.0 + 8.0 * (0.5 + 0.5 * (3.0 * azimuth).sin());
+                let floor = if dz < 0.0 {
+                    at[2].max(0.5) / -dz
+                } else {
+                    f64::INFINITY
+                };
+                let range = (wall / elevation.cos()).min(floor).min(60.0);
+                points.push([
+                    (at[0] + range * dx) as f32,
+                    (at[1] + range * dy) as f32,
+                    (at[2] + range * dz) as f32,
+                ]);
+                rings.push(laser);
+            }
+        }
+    }
+
+    fn scan_in_base_link(sensors: &[[f64; 3]]) -> Scan {
+        let (mut points, mut rings) = (Vec::new(), Vec::new());
+        for &at in sensors {
+            sensor_points(at, &mut points, &mut rings);
+        }
+        let n = points.len() as u32;
+        Scan {
+            stamp_ns: 0,
+            frame_id: "base_link".into(),
+            sensor_pose: Isometry3::identity(),
+            input_point_count: n,
+            points_m: points,
+            intensity: None,
+            ring: Some(rings),
+            time_offset_s: None,
+            source_index: (0..n).collect(),
+            skipped_invalid_points: 0,
+            organized: None,
+            layout: ScanLayout::from_fields(Some("ring"), None),
+        }
+    }
+
+    #[test]
+    fn a_sensor_off_the_clouds_origin_is_found_from_its_rings() {
+        let scan = scan_in_base_link(&[[0.9, -0.3, 1.8]]);
+        let tree = TransformTree::new();
+        let (origin, warnings) = locate(&scan, (&tree, &tree), None, 0.1);
+        assert_eq!(origin.source, OriginSource::Geometry, "{origin:?}");
+        for (got, want) in origin.position_m.iter().zip([0.9, -0.3, 1.8]) {
+            assert!((got - want).abs() < 0.01, "{origin:?}");
+        }
+        assert!(origin.ring_spread_deg.unwrap() < 0.05, "{origin:?}");
+        assert!(
+            !origin.several_origins && warnings.is_empty(),
+            "{warnings:?}"
+        );
+        // Moved about it, the points are the sensor's own again.
+        let mut moved = scan.clone();
+        apply(&mut moved, &origin);
+        let p = moved.points_m[0];
+        assert!((f64::from(p[2]) + 1.8).abs() < 0.05, "{p:?}");
+        assert!((moved.sensor_pose.translation.vector.x - 0.9).abs() < 0.01);
+    }
+
+    #[test]
+    fn two_sensors_merged_into_one_cloud_are_said() {
+        let scan = scan_in_base_link(&[[1.0, 0.8, 0.6], [1.0, -0.8, 1.9]]);
+        let tree = TransformTree::new();
+        let (origin, warnings) = locate(&scan, (&tree, &tree), None, 0.1);
+        assert!(origin.several_origins, "{origin:?}");
+        assert!(
+            warnings.iter().any(|w| w.contains("several sensors")),
+            "{warnings:?}"
+        );
+    }
 }
