@@ -9,8 +9,10 @@
 //! 1. `--sensor-frame`: the transform from the cloud's frame to that frame;
 //! 2. a cloud frame whose name says LiDAR (`velo_link`, `lidar`, `os_sensor`,
 //!    ...) is the sensor's own;
-//! 3. `/tf_static`: a frame connected to the cloud's whose name says LiDAR
-//!    (of several, the one whose origin makes the sharpest rings);
+//! 3. `/tf_static` and `/tf`: a frame connected to the cloud's whose name
+//!    says LiDAR (of several, the one about whose origin the rings are
+//!    narrowest); when only `/tf` reaches it (a cloud in a world frame), it
+//!    is looked up again at every scan's stamp;
 //! 4. the geometry, where the rings are known without the origin (a ring
 //!    field, an organized cloud's rows, the laser or firing order): the
 //!    point about which each ring's returns lie closest to one elevation (a
