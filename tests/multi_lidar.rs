@@ -243,3 +243,34 @@ fn three_lidars_find_the_cut_in_once_with_each_sensor_as_accurate_as_alone() {
         assert!(f1 >= 0.95, "{topic}: moving F1 {f1}");
     }
 }
+
+/// A sensor that dies (its clouds stop after the third) does not stop the
+/// others: both are annotated as far as their clouds go, the near miss is
+/// found by the living one and named with it alone.
+#[test]
+fn a_dead_sensor_does_not_stop_the_others() {
+    let dir = scratch("multi-lidar-dead");
+    let two = cut_in_with_two_lidars(&dir);
+    let input = dir.join("dead.mcap");
+    let mut front_seen = 0;
+    common::rewrite_mcap(&two, &input, |m| {
+        if m.channel.topic == "/lidar_front/points" {
+            front_seen += 1;
+            if front_seen > 3 {
+                return None;
+            }
+        }
+        Some(m)
+    });
+    let out = dir.join("out.mcap");
+    let run = looming_process(&input, &out, &[]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let contents = read_all(&std::fs::read(&out).unwrap());
+    let alive = contents.topic_messages("/looming/lidar/points").len();
+    let dead = contents.topic_messages("/looming/lidar_front/points").len();
+    assert_eq!((alive, dead), (19, 2));
+    let events = contents.topic_messages("/looming/events");
+    assert_eq!(events.len(), 1);
+    let event: serde_json::Value = serde_json::from_slice(&events[0].data).unwrap();
+    assert_eq!(event["sensors"], serde_json::json!(["lidar"]));
+}
