@@ -206,6 +206,21 @@ fn three_lidars_find_the_cut_in_once_with_each_sensor_as_accurate_as_alone() {
     );
     let ttc = event["min_time_to_contact_s"].as_f64().unwrap();
     assert!((0.8..1.2).contains(&ttc), "{ttc}");
+    // LiDAR only (no IMU, twist or odometry): the sensors are placed in the
+    // roof's frame through /tf_static and the near miss is still one.
+    let lidar_only = dir.join("lidar-only.mcap");
+    let motion = ["/imu/data", "/vehicle/twist", "/odom"];
+    common::rewrite_mcap(&input, &lidar_only, |m| {
+        (!motion.contains(&m.channel.topic.as_str())).then_some(m)
+    });
+    let only_out = dir.join("lidar-only-out.mcap");
+    let run = looming_process(&lidar_only, &only_out, &[]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let only = read_all(&std::fs::read(&only_out).unwrap());
+    let events = only.topic_messages("/looming/events");
+    assert_eq!(events.len(), 1, "one near miss without a motion source too");
+    let event: serde_json::Value = serde_json::from_slice(&events[0].data).unwrap();
+    assert_eq!(event["sensors"].as_array().unwrap().len(), 3, "{event}");
     for topic in [
         "/lidar_roof/points",
         "/lidar_left/points",

@@ -165,7 +165,7 @@ fn sensor_lines(out: &mut String, s: &RunSummary) {
             .map_or("no layout".to_string(), ToString::to_string);
         let frame = sensor.vehicle_frame.as_ref().map_or_else(
             || "no transform to the vehicle: its events stand alone".to_string(),
-            |frame| format!("in vehicle frame {frame}"),
+            |frame| format!("events merged in frame {frame}"),
         );
         let _ = writeln!(
             out,

@@ -205,6 +205,11 @@ impl PairingStage {
         self.pairer.stats()
     }
 
+    /// The static transforms the pairer received.
+    pub(crate) fn transforms(&self) -> &crate::pairing::TransformTree {
+        self.pairer.transforms()
+    }
+
     fn pairs(&mut self, events: Vec<PairEvent>) -> Vec<ScanPair> {
         let mut pairs = Vec::new();
         for event in events {

@@ -15,7 +15,9 @@ use crate::events::{NearMissEvent, SensorEvents, merge_sensor_events};
 use crate::model::{ExtrinsicSource, ScanPair};
 use crate::output::OutputWriter;
 use crate::pairing::PairingStats;
+use crate::pairing::TransformTree;
 use crate::topics::{TopicSelection, sensor_names};
+use nalgebra::Isometry3;
 
 use super::scans::{BadMessages, DecodedCounts, SensorPairing};
 use super::stages::ToWriter;
@@ -40,6 +42,10 @@ struct SensorAnnotation {
     /// Where the sensor sits on the vehicle (from the extrinsic of its
     /// pairs' motion source), for merging events.
     vehicle_from_sensor: Option<(String, nalgebra::Isometry3<f64>)>,
+    /// The frame its points are posed in and their pose there (its last
+    /// pair's, `pairing::origin::extrinsic_frame`): where `/tf_static` can
+    /// place it when no motion source does.
+    frame: Option<(String, nalgebra::Isometry3<f64>)>,
 }
 
 /// Registers our channels: as always with one LiDAR; with several, the
@@ -68,6 +74,7 @@ pub(super) fn add_own_channels(
         pairs_channel,
         pairs_written: 0,
         vehicle_from_sensor: None,
+        frame: None,
     };
     if names.len() == 1 {
         let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
@@ -123,8 +130,9 @@ pub struct SensorOutcome {
     pub pairs_written: u64,
     pub pairing: PairingStats,
     pub annotation: AnnotateStats,
-    /// The vehicle frame its events were merged in; absent when no
-    /// transform relates it to the vehicle (its events stand alone).
+    /// The frame its events were merged in (its motion source's, or on a
+    /// LiDAR-only log the first sensor's through `/tf_static`); absent when
+    /// no transform places it (its events stand alone).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vehicle_frame: Option<String>,
 }
@@ -205,13 +213,20 @@ impl Annotation {
 
     /// End of the log: the events still open, and with several LiDARs all
     /// the sensors' events merged into one list and written. The log's events.
-    pub(super) fn finish(&mut self, tx: &SyncSender<ToWriter>) -> Vec<NearMissEvent> {
+    pub(super) fn finish(
+        &mut self,
+        tx: &SyncSender<ToWriter>,
+        tree: Option<&TransformTree>,
+    ) -> Vec<NearMissEvent> {
         for sensor in &mut self.sensors {
             for message in sensor.annotator.finish() {
                 if tx.send(ToWriter::Own(message)).is_err() {
                     return Vec::new();
                 }
             }
+        }
+        if let (Some(tree), Some(_)) = (tree, &self.merged_events) {
+            self.place_by_transforms(tree);
         }
         let Some(writer) = &mut self.merged_events else {
             return self
@@ -241,6 +256,38 @@ impl Annotation {
     }
 }
 
+impl Annotation {
+    /// Without a motion source in common (a LiDAR-only log), the sensors'
+    /// poses in the first sensor's frame through `/tf_static`, so that their
+    /// events still merge; only when every sensor is reached.
+    fn place_by_transforms(&mut self, tree: &TransformTree) {
+        let frames: Vec<&str> = self
+            .sensors
+            .iter()
+            .map(|s| s.vehicle_from_sensor.as_ref().map_or("", |v| v.0.as_str()))
+            .collect();
+        if frames.iter().all(|f| !f.is_empty() && *f == frames[0]) {
+            return;
+        }
+        let Some((common, _)) = self.sensors.first().and_then(|s| s.frame.clone()) else {
+            return;
+        };
+        let placed: Option<Vec<Isometry3<f64>>> = self
+            .sensors
+            .iter()
+            .map(|s| {
+                let (frame, pose) = s.frame.as_ref()?;
+                Some(tree.lookup(&common, frame)? * pose)
+            })
+            .collect();
+        if let Some(poses) = placed {
+            for (sensor, pose) in self.sensors.iter_mut().zip(poses) {
+                sensor.vehicle_from_sensor = Some((common.clone(), pose));
+            }
+        }
+    }
+}
+
 impl SensorAnnotation {
     /// Annotate one pair and send its messages; false when the writer has gone.
     fn emit(&mut self, pair: &ScanPair, tx: &SyncSender<ToWriter>) -> bool {
@@ -254,6 +301,10 @@ impl SensorAnnotation {
             self.vehicle_from_sensor =
                 Some((extrinsic.motion_frame.clone(), extrinsic.motion_from_lidar));
         }
+        self.frame = Some(crate::pairing::origin::extrinsic_frame(
+            &pair.current,
+            false,
+        ));
         // The pair's quality figures come from its annotation; its
         // record still goes out first.
         let annotation = self.annotator.annotate(pair);

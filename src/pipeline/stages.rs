@@ -316,7 +316,8 @@ fn pair_scans(
     if let Some(annotation) = &mut annotation
         && annotation.emit(pairs, &tx)
     {
-        events = annotation.finish(&tx);
+        let tree = stage.stages().first().map(|s| s.transforms().clone());
+        events = annotation.finish(&tx, tree.as_ref());
     }
     outcome(&stage, annotation.as_ref(), events)
 }

@@ -351,6 +351,11 @@ impl ScanPairer {
         self.emit_pending(false)
     }
 
+    /// The static transforms received so far (`/tf_static`).
+    pub fn transforms(&self) -> &TransformTree {
+        &self.transforms
+    }
+
     pub fn stats(&self) -> &PairingStats {
         &self.stats
     }
