@@ -13,10 +13,9 @@
 //!                 current becomes previous (HavePrevious)
 //! ```
 //!
-//! Physics uses header stamps (`Scan::stamp_ns`, `Scan::time_span_ns()`);
-//! only the ordering of calls follows log time. At most one pair is pending
-//! and at most two scans are held; motion samples are pruned as pairs are
-//! emitted, so memory is bounded however long the log.
+//! Physics uses header stamps; only the order of calls follows log time.
+//! One pair at most is pending and two scans held; motion samples are pruned
+//! as pairs go out, so memory is bounded however long the log.
 
 mod buffer;
 pub mod frames;
