@@ -287,9 +287,7 @@ impl ScanPairer {
         let (warnings, found) =
             self.placement
                 .place(scan, &self.transforms, sensor_frame, period_s);
-        if found.is_some() {
-            self.stats.sensor_origin = found;
-        }
+        self.stats.sensor_origin = found.or(self.stats.sensor_origin.take());
         warnings
     }
 
