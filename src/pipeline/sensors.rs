@@ -42,9 +42,10 @@ struct SensorAnnotation {
     /// Where the sensor sits on the vehicle (from the extrinsic of its
     /// pairs' motion source), for merging events.
     vehicle_from_sensor: Option<(String, nalgebra::Isometry3<f64>)>,
-    /// The frame its points are posed in and their pose there (its last
-    /// pair's, `pairing::origin::extrinsic_frame`): where `/tf_static` can
-    /// place it when no motion source does.
+    /// The frame its points are posed in and their pose there (its first
+    /// pair's, `pairing::origin::extrinsic_frame`; a world-frame cloud's is
+    /// its named sensor frame, the same in every pair): where `/tf_static`
+    /// can place it when no motion source does.
     frame: Option<(String, nalgebra::Isometry3<f64>)>,
 }
 
@@ -301,10 +302,12 @@ impl SensorAnnotation {
             self.vehicle_from_sensor =
                 Some((extrinsic.motion_frame.clone(), extrinsic.motion_from_lidar));
         }
-        self.frame = Some(crate::pairing::origin::extrinsic_frame(
-            &pair.current,
-            false,
-        ));
+        if self.frame.is_none() {
+            self.frame = Some(crate::pairing::origin::extrinsic_frame(
+                &pair.current,
+                false,
+            ));
+        }
         // The pair's quality figures come from its annotation; its
         // record still goes out first.
         let annotation = self.annotator.annotate(pair);

@@ -260,8 +260,10 @@ impl ScanPairer {
     pub fn push_decoded(&mut self, log_time_ns: u64, decoded: Decoded) -> Vec<PairEvent> {
         match decoded {
             Decoded::Scan(mut scan) => {
-                let warnings = self.place_sensor(&mut scan);
-                self.complete_layout(&mut scan);
+                // Taken once: `layout_period_s` records the scan's stamp.
+                let period_s = self.layout_period_s(scan.stamp_ns);
+                let warnings = self.place_sensor(&mut scan, period_s);
+                self.complete_layout(&mut scan, period_s);
                 let mut events: Vec<PairEvent> =
                     warnings.into_iter().map(PairEvent::Warning).collect();
                 events.extend(self.push_scan(log_time_ns, Arc::new(scan)));
@@ -281,8 +283,7 @@ impl ScanPairer {
 
     /// Moves the scan's points about its sensor's origin, found on the first
     /// scan with points ([`origin::locate`]); the warnings that finding gave.
-    pub fn place_sensor(&mut self, scan: &mut Scan) -> Vec<String> {
-        let period_s = self.layout_period_s(scan.stamp_ns);
+    fn place_sensor(&mut self, scan: &mut Scan, period_s: f64) -> Vec<String> {
         let sensor_frame = self.cfg.sensor_frame.as_deref();
         let (warnings, found) =
             self.placement
@@ -292,9 +293,8 @@ impl ScanPairer {
     }
 
     /// Recovers the scan's rings and times (`engine::layout::complete`) with
-    /// the scan period from the stamps, and records the layout.
-    pub fn complete_layout(&mut self, scan: &mut Scan) {
-        let period_s = self.layout_period_s(scan.stamp_ns);
+    /// the scan period (`period_s`, from the stamps), and records the layout.
+    fn complete_layout(&mut self, scan: &mut Scan, period_s: f64) {
         layout::complete(scan, period_s);
         let kind = format!(
             "{} / {}",

@@ -27,7 +27,7 @@
 //! whose best origin still leaves its rings spread is flagged: its rays do
 //! not meet at one point (several sensors merged, or a tilted one).
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use rayon::prelude::*;
 
 use super::frames::{TransformTree, normalize_frame_id};
@@ -193,7 +193,7 @@ fn find(
     } else {
         best_candidate(&sample, candidates)
     };
-    origin.cloud_origin_ring_spread_deg = ring_spread_deg(&sample, Vector3::zeros());
+    origin.cloud_origin_ring_spread_deg = ring_spread_deg(&sample, &Isometry3::identity());
     (origin, warning)
 }
 
@@ -206,7 +206,7 @@ fn best_candidate(
     let (frame, pose, spread) = candidates
         .into_iter()
         .map(|(frame, pose)| {
-            let spread = ring_spread_deg(&sample.moved(&pose.inverse()), Vector3::zeros());
+            let spread = ring_spread_deg(sample, &pose);
             (frame, pose, spread)
         })
         .min_by(|a, b| {
@@ -300,28 +300,11 @@ fn known_rings(scan: &Scan, period_s: f64) -> Option<Vec<u16>> {
     })
 }
 
-impl RingedSample {
-    /// The sample's points mapped by `to` (into another frame).
-    fn moved(&self, to: &Isometry3<f64>) -> RingedSample {
-        RingedSample {
-            points: self
-                .points
-                .iter()
-                .map(|p| {
-                    let q = to * Point3::new(p[0], p[1], p[2]);
-                    [q.x, q.y, q.z]
-                })
-                .collect(),
-            rings: self.rings.clone(),
-            ring_count: self.ring_count,
-        }
-    }
-}
-
-fn elevation_deg(p: &[f64; 3], origin: &Vector3<f64>) -> Option<f64> {
-    let (dx, dy, dz) = (p[0] - origin.x, p[1] - origin.y, p[2] - origin.z);
-    let horizontal = dx.hypot(dy);
-    (horizontal >= MIN_RANGE_M).then(|| dz.atan2(horizontal).to_degrees())
+/// The elevation of cloud point `p` seen from the sensor at `cloud_from_sensor`.
+fn elevation_deg(p: &[f64; 3], sensor_from_cloud: &Isometry3<f64>) -> Option<f64> {
+    let q = sensor_from_cloud * Point3::new(p[0], p[1], p[2]);
+    let horizontal = q.x.hypot(q.y);
+    (horizontal >= MIN_RANGE_M).then(|| q.z.atan2(horizontal).to_degrees())
 }
 
 /// RMS distance of the returns' elevations about `origin` from their
@@ -329,16 +312,18 @@ fn elevation_deg(p: &[f64; 3], origin: &Vector3<f64>) -> Option<f64> {
 /// sensor's origin this is the beam's width and the lasers' offsets from
 /// the axis (hundredths of a degree); about another point the cones smear.
 /// `None` without returns.
-fn ring_spread_deg(sample: &RingedSample, origin: Vector3<f64>) -> Option<f64> {
-    ring_stats(sample, origin).map(|(within, _)| within.sqrt())
+fn ring_spread_deg(sample: &RingedSample, cloud_from_sensor: &Isometry3<f64>) -> Option<f64> {
+    ring_stats(sample, cloud_from_sensor).map(|(within, _)| within.sqrt())
 }
 
 /// The variance of the returns' elevations within their rings and that of
 /// the rings' mean elevations (weighted by their returns), degrees^2.
-fn ring_stats(sample: &RingedSample, origin: Vector3<f64>) -> Option<(f64, f64)> {
+fn ring_stats(sample: &RingedSample, cloud_from_sensor: &Isometry3<f64>) -> Option<(f64, f64)> {
+    let sensor_from_cloud = cloud_from_sensor.inverse();
     let mut sums = vec![(0.0f64, 0.0f64, 0u32); sample.ring_count];
     for (p, &ring) in sample.points.iter().zip(&sample.rings) {
-        if let (Some(e), Some(sum)) = (elevation_deg(p, &origin), sums.get_mut(usize::from(ring))) {
+        let e = elevation_deg(p, &sensor_from_cloud);
+        if let (Some(e), Some(sum)) = (e, sums.get_mut(usize::from(ring))) {
             sum.0 += e;
             sum.1 += e * e;
             sum.2 += 1;
@@ -364,8 +349,8 @@ fn ring_stats(sample: &RingedSample, origin: Vector3<f64>) -> Option<(f64, f64)>
 /// their elevations. The spread alone has a false minimum: about a point
 /// on the road's plane every ring that sees only road reads 0 degrees; but
 /// then the lasers' rings no longer lie at different elevations.
-fn ring_objective(sample: &RingedSample, origin: Vector3<f64>) -> Option<f64> {
-    let (within, between) = ring_stats(sample, origin)?;
+fn ring_objective(sample: &RingedSample, cloud_from_sensor: &Isometry3<f64>) -> Option<f64> {
+    let (within, between) = ring_stats(sample, cloud_from_sensor)?;
     (between > 0.0).then(|| within / between)
 }
 
@@ -376,26 +361,6 @@ fn pose_of(params: &[f64; 5]) -> Isometry3<f64> {
         Translation3::new(params[0], params[1], params[2]),
         UnitQuaternion::from_euler_angles(params[3], params[4], 0.0),
     )
-}
-
-/// The sample in the sensor's frame at `params`.
-fn in_sensor(sample: &RingedSample, params: &[f64; 5]) -> RingedSample {
-    let sensor_from_cloud = pose_of(params).inverse();
-    let mut moved = Vec::with_capacity(sample.points.len());
-    for p in &sample.points {
-        let q = sensor_from_cloud * Point3::new(p[0], p[1], p[2]);
-        moved.push([q.x, q.y, q.z]);
-    }
-    RingedSample {
-        points: moved,
-        rings: sample.rings.clone(),
-        ring_count: sample.ring_count,
-    }
-}
-
-/// The spread of the rings about the sensor at `params`, degrees.
-fn spread_at(sample: &RingedSample, params: &[f64; 5]) -> Option<f64> {
-    ring_spread_deg(&in_sensor(sample, params), Vector3::zeros())
 }
 
 /// The pose about which the rings are narrowest: coarse searches along z,
@@ -440,7 +405,7 @@ fn estimate(sample: &RingedSample) -> SensorOrigin {
     } else {
         SensorOrigin::at(OriginSource::Geometry, pose)
     };
-    origin.ring_spread_deg = spread_at(sample, &best);
+    origin.ring_spread_deg = ring_spread_deg(sample, &origin.cloud_from_sensor);
     origin.several_origins = origin
         .ring_spread_deg
         .is_some_and(|s| s > MERGED_SPREAD_DEG);
@@ -449,7 +414,7 @@ fn estimate(sample: &RingedSample) -> SensorOrigin {
 
 /// The search's objective at `params` (infinite where it has none).
 fn objective_at(sample: &RingedSample, params: &[f64; 5]) -> f64 {
-    ring_objective(&in_sensor(sample, params), Vector3::zeros()).unwrap_or(f64::INFINITY)
+    ring_objective(sample, &pose_of(params)).unwrap_or(f64::INFINITY)
 }
 
 /// Steps of the simplex search.
@@ -542,7 +507,8 @@ fn search(
     };
     let size = |o: &[f64; 5]| o.iter().map(|v| v * v).sum::<f64>();
     grid.into_par_iter()
-        .filter_map(|o| Some((ring_objective(&in_sensor(sample, &o), Vector3::zeros())?, o)))
+        .map(|o| (objective_at(sample, &o), o))
+        .filter(|(value, _)| value.is_finite())
         .min_by(|a, b| a.0.total_cmp(&b.0).then(size(&a.1).total_cmp(&size(&b.1))))
         .map_or(centre, |(_, o)| o)
 }
