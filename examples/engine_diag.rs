@@ -377,7 +377,7 @@ fn print_mask_shares_per_row(r: &engine::PairLooming) {
 /// The engine's own motion estimate for the pair.
 fn print_ego_estimate(e: &engine::egomotion::EgoEstimate) {
     println!(
-        "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m  sd v {:.3} {:.3} {:.3} m/s w {:.4} {:.4} {:.4} rad/s",
+        "  estimate v {:+.2} {:+.2} {:+.3} m/s  w {:+.4} {:+.4} {:+.4} rad/s  inliers {} scale {:.3} m  renders {}  sd v {:.3} {:.3} {:.3} m/s w {:.4} {:.4} {:.4} rad/s",
         e.velocity_mps[0],
         e.velocity_mps[1],
         e.velocity_mps[2],
@@ -386,6 +386,7 @@ fn print_ego_estimate(e: &engine::egomotion::EgoEstimate) {
         e.angular_velocity_radps[2],
         e.inlier_cells,
         e.residual_m,
+        e.renders,
         e.covariance[3][3].sqrt(),
         e.covariance[4][4].sqrt(),
         e.covariance[5][5].sqrt(),

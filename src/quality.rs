@@ -615,6 +615,7 @@ mod tests {
                 velocity_mps: None,
                 angular_velocity_radps: None,
                 ego_estimate: None,
+                stage_times: Default::default(),
             }
         }
     }

@@ -43,6 +43,8 @@ pub struct EgoEstimate {
     /// movers ([`Correction::covariance`]); zero rows and columns for what a
     /// source measured.
     pub covariance: [[f64; 6]; 6],
+    /// Renders of the previous scan the estimate took.
+    pub renders: usize,
 }
 
 impl EgoEstimate {
@@ -105,6 +107,14 @@ pub struct Correction {
     pub covariance: Matrix6<f64>,
 }
 
+impl Correction {
+    /// (angular, linear) velocity as one vector, the equations' order.
+    fn as_vector(&self) -> Vector6<f64> {
+        let (w, v) = (self.angular_radps, self.velocity_mps);
+        Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
+    }
+}
+
 /// The correction to the motion the render was made with; `None` without
 /// enough static surface to pin the motion down.
 pub fn correction(
@@ -115,9 +125,30 @@ pub fn correction(
     prior: &Prior,
 ) -> Option<Correction> {
     let equations = equations(current, current_time_ns, rendered);
+    solve(&equations, &Vector6::zeros(), range_noise_m, prior)
+}
+
+/// The correction beyond `applied` (a correction already taken, not yet
+/// rendered): each equation's misfit is first moved by it along its
+/// linearisation, `misfit - J . applied`. Reweighting against these instead
+/// of a new render is what lets one render serve several robust steps.
+fn solve(
+    equations: &[Equation],
+    applied: &Vector6<f64>,
+    range_noise_m: f64,
+    prior: &Prior,
+) -> Option<Correction> {
     if equations.len() < MIN_EQUATIONS {
         return None;
     }
+    let moved: Vec<Equation> = equations
+        .iter()
+        .map(|eq| Equation {
+            misfit_m: eq.misfit_m - eq.jacobian.dot(applied),
+            ..*eq
+        })
+        .collect();
+    let equations = moved.as_slice();
     let mut misfits: Vec<f64> = equations.iter().map(|e| e.misfit_m.abs()).collect();
     let median = median_in_place(&mut misfits);
     // The scale of a static surface's misfit: no smaller than the noise.
@@ -158,7 +189,7 @@ pub fn correction(
     if !solution.iter().all(|x| x.is_finite()) {
         return None;
     }
-    let covariance = clustered_covariance(&equations, &weights, &solution, &cholesky.inverse());
+    let covariance = clustered_covariance(equations, &weights, &solution, &cholesky.inverse());
     Some(Correction {
         angular_radps: Vector3::new(solution[0], solution[1], solution[2]),
         velocity_mps: Vector3::new(solution[3], solution[4], solution[5]),
@@ -178,17 +209,21 @@ fn clustered_covariance(
     solution: &Vector6<f64>,
     normal_inverse: &Matrix6<f64>,
 ) -> Matrix6<f64> {
-    let mut scores: std::collections::HashMap<u32, Vector6<f64>> = std::collections::HashMap::new();
+    // Per sector, in sector order (so the sums, and the output, are the same
+    // from run to run).
+    let mut scores: Vec<Option<Vector6<f64>>> = vec![None; AZIMUTH_SECTORS];
     for (eq, &w) in equations.iter().zip(weights) {
         let left_m = eq.misfit_m - eq.jacobian.dot(solution);
-        *scores.entry(eq.block).or_insert_with(Vector6::zeros) += eq.jacobian * (w * left_m);
+        let score = scores[eq.block as usize].get_or_insert_with(Vector6::zeros);
+        *score += eq.jacobian * (w * left_m);
     }
-    let blocks = scores.len() as f64;
+    let blocks = scores.iter().flatten().count() as f64;
     if blocks < 2.0 {
         return Matrix6::from_element(f64::INFINITY);
     }
     let meat = scores
-        .values()
+        .iter()
+        .flatten()
         .fold(Matrix6::zeros(), |sum, s| sum + s * s.transpose());
     normal_inverse * meat * normal_inverse * (blocks / (blocks - 1.0))
 }
@@ -267,8 +302,46 @@ fn median_in_place(values: &mut [f64]) -> f64 {
     *values.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// Renders of the previous scan tried to estimate the motion.
-const ESTIMATE_ITERATIONS: usize = 8;
+/// Renders of the previous scan tried to estimate the motion, at most.
+const ESTIMATE_RENDERS: usize = 8;
+/// Robust steps taken on one render, at most: each reweights the cells
+/// against the misfits the steps before it left (linearised), so a render
+/// serves the reweighting and the next render only corrects what the
+/// linearisation missed (which surfaces the rays meet).
+const STEPS_PER_RENDER: usize = 4;
+
+/// Whether a correction is small against the estimate's own uncertainty:
+/// every component within a fifth of its standard deviation. A render more
+/// would move the estimate by less than it is known to (where movers pull
+/// it, renders went on shifting it by noise up to the cap).
+fn within_noise(correction: &Vector6<f64>, covariance: &Matrix6<f64>) -> bool {
+    (0..6).all(|k| correction[k].abs() <= 0.2 * covariance[(k, k)].max(0.0).sqrt())
+}
+
+/// The robust steps taken on one render's `equations` until one is
+/// `negligible`: their sum (angular, then linear velocity) and the last
+/// step's fit. `None` when the first finds too little static surface.
+fn steps_on_render(
+    equations: &[Equation],
+    range_noise_m: f64,
+    prior: &Prior,
+    negligible: impl Fn(&Vector6<f64>) -> bool,
+) -> Option<(Vector6<f64>, Correction)> {
+    let mut taken = Vector6::zeros();
+    let mut last = None;
+    for _ in 0..STEPS_PER_RENDER {
+        let Some(step) = solve(equations, &taken, range_noise_m, prior) else {
+            break;
+        };
+        let vector = step.as_vector();
+        taken += vector;
+        last = Some(step);
+        if negligible(&vector) {
+            break;
+        }
+    }
+    last.map(|step| (taken, step))
+}
 
 /// The pair's motion with what no source measured estimated from the static
 /// world: the previous scan is rendered with a trial motion, corrected
@@ -283,7 +356,7 @@ pub(super) fn estimate_motion(
     config: &EngineConfig,
     (start_ns, end_ns): (StampNs, StampNs),
     first_guess: Option<(Vector3<f64>, Vector3<f64>)>,
-) -> Option<(PairMotion, EgoEstimate)> {
+) -> Option<EstimatedMotion> {
     let stamp_ns = pair.current.stamp_ns;
     let measured = &pair.motion;
     let prior = Prior {
@@ -297,29 +370,40 @@ pub(super) fn estimate_motion(
         .unwrap_or(guess_angular);
     let mut velocity = measured.velocity_at(stamp_ns).unwrap_or(guess_velocity);
     let offset_ns = stamp_ns - pair.previous.stamp_ns;
+    // Converged: a correction moves a surface 10 m away by less than a
+    // millimetre.
+    let dt_s = offset_ns as f64 * 1e-9;
+    let negligible = |c: &Vector6<f64>| {
+        (c.fixed_rows::<3>(3).norm() + c.fixed_rows::<3>(0).norm() * 10.0) * dt_s < 1e-3
+    };
     let mut fit = None;
-    for _ in 0..ESTIMATE_ITERATIONS {
+    let mut renders = 0;
+    // The last render, while it was made with the motion estimated so far.
+    let mut current_render = None;
+    for _ in 0..ESTIMATE_RENDERS {
         let trial = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
         let trajectory = Trajectory::integrate(&trial, MotionModel::Full, true, start_ns, end_ns)?;
         let rendered = warp::render(source, target, geometry, &trajectory, offset_ns);
-        let Some(step) = correction(
-            current,
-            current_time,
-            &rendered,
+        renders += 1;
+        let Some((taken, last)) = steps_on_render(
+            &equations(current, current_time, &rendered),
             config.range_noise_m,
             &prior,
+            negligible,
         ) else {
             break;
         };
-        angular += step.angular_radps;
-        velocity += step.velocity_mps;
-        fit = Some(step);
-        // Converged: the update moves a surface 10 m away by less than a
-        // millimetre.
-        let dt_s = offset_ns as f64 * 1e-9;
-        if (step.velocity_mps.norm() + step.angular_radps.norm() * 10.0) * dt_s < 1e-3 {
+        let settled = negligible(&taken) || within_noise(&taken, &last.covariance);
+        fit = Some(last);
+        if settled {
+            // The settled correction is below what the estimate is known
+            // to, or a millimetre at 10 m: left out, so this render is the
+            // one of the estimated motion and serves the pair's ego render.
+            current_render = Some(rendered);
             break;
         }
+        angular += taken.fixed_rows::<3>(0);
+        velocity += taken.fixed_rows::<3>(3);
     }
     let Correction {
         inlier_cells,
@@ -328,9 +412,10 @@ pub(super) fn estimate_motion(
         ..
     } = fit?;
     let motion = with_constant_motion(measured, velocity, angular, start_ns, end_ns);
-    Some((
+    Some(EstimatedMotion {
         motion,
-        EgoEstimate {
+        rendered: current_render,
+        estimate: EgoEstimate {
             velocity_mps: [velocity.x, velocity.y, velocity.z],
             angular_velocity_radps: [angular.x, angular.y, angular.z],
             inlier_cells,
@@ -338,8 +423,19 @@ pub(super) fn estimate_motion(
             velocity_estimated: !prior.velocity_known,
             rotation_estimated: !prior.rotation_known,
             covariance: unmeasured_covariance(&covariance, &prior),
+            renders,
         },
-    ))
+    })
+}
+
+/// What [`estimate_motion`] gives.
+pub(super) struct EstimatedMotion {
+    /// The pair's motion, with what no source measured estimated.
+    pub(super) motion: PairMotion,
+    pub(super) estimate: EgoEstimate,
+    /// The previous scan rendered with exactly `motion`, when the estimate
+    /// settled on its last render (else one is still to make).
+    pub(super) rendered: Option<Rendered>,
 }
 
 /// `covariance` with the rows and columns of what a source measured set to

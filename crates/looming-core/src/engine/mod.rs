@@ -47,7 +47,7 @@ use crate::model::{Scan, StampNs};
 
 pub use config::EngineConfig;
 pub use grid::{ImageGeometry, NO_POINT, RangeImage};
-pub use result::{Availability, PairLooming, mask};
+pub use result::{Availability, PairLooming, StageTimes, mask};
 pub use threat::{ThreatLevel, ThreatSphere};
 
 use cells::per_cell;
@@ -132,6 +132,14 @@ pub fn compute(pair: &ScanPair, config: &EngineConfig) -> Option<PairLooming> {
 
 /// [`compute`], reusing the previous scan's image and surfaces when the cache
 /// holds them (the same result, about a third less work on a stream of pairs).
+/// Runs `stage`, adding its wall time to `seconds`.
+fn timed<T>(seconds: &mut f64, stage: impl FnOnce() -> T) -> T {
+    let started = std::time::Instant::now();
+    let value = stage();
+    *seconds += started.elapsed().as_secs_f64();
+    value
+}
+
 pub fn compute_with_cache(
     pair: &ScanPair,
     config: &EngineConfig,
@@ -168,6 +176,8 @@ pub fn compute_with_cache(
         cache.range_bias.wants_estimate(0),
         cache.range_bias.wants_estimate(previous_ahead),
     );
+    let mut times = StageTimes::default();
+    let started = std::time::Instant::now();
     let (previous_gridded, (cur_image, cur_bias)) = rayon::join(
         || match cached {
             Some(c) => Ok((c.image, c.surfaces)),
@@ -189,6 +199,8 @@ pub fn compute_with_cache(
         (image, applied)
     });
     let cur_applied = cache.range_bias.update(cur_bias, rows);
+    times.range_images_s = started.elapsed().as_secs_f64();
+    let started = std::time::Instant::now();
     let ((prev_image, prev_surfaces), cur_surfaces) = rayon::join(
         || match previous_to_fit {
             Ok(done) => done,
@@ -199,13 +211,14 @@ pub fn compute_with_cache(
         },
         || Surfaces::estimate(current, &cur_image, &geometry, params, cur_applied),
     );
+    times.plane_fits_s = started.elapsed().as_secs_f64();
     let result = compute_from_surfaces(
         pair,
         config,
         &geometry,
         (&prev_image, &prev_surfaces),
         (&cur_image, &cur_surfaces),
-        previous_estimate,
+        (previous_estimate, times),
     );
     let estimate = result.as_ref().and_then(|r| r.ego_estimate);
     cache.last = Some(CachedScan::keep(
@@ -218,21 +231,32 @@ pub fn compute_with_cache(
     result
 }
 
+/// A motion to start the estimate from: (velocity m/s, angular velocity
+/// rad/s).
+type MotionGuess = (Vector3<f64>, Vector3<f64>);
+
 fn compute_from_surfaces(
     pair: &ScanPair,
     config: &EngineConfig,
     geometry: &ImageGeometry,
     (prev_image, prev_surfaces): (&RangeImage, &Surfaces),
     (cur_image, cur_surfaces): (&RangeImage, &Surfaces),
-    first_guess: Option<(Vector3<f64>, Vector3<f64>)>,
+    (first_guess, mut times): (Option<MotionGuess>, StageTimes),
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = geometry.clone();
-    let prev_time = cell_times(previous, prev_image);
-    let cur_time = cell_times(current, cur_image);
-    let coords = cell_coords(cur_surfaces, &geometry);
-    let column_time = column_times(&cur_time, cur_surfaces, &geometry);
-    let (start_ns, end_ns) = (
+    let (prev_time, cur_time, coords, column_time) = timed(&mut times.cell_times_s, || {
+        let cur_time = cell_times(current, cur_image);
+        let column_time = column_times(&cur_time, cur_surfaces, &geometry);
+        let coords = cell_coords(cur_surfaces, &geometry);
+        (
+            cell_times(previous, prev_image),
+            cur_time,
+            coords,
+            column_time,
+        )
+    });
+    let span = (
         previous.time_span_ns().0 - 1_000_000,
         current.time_span_ns().1 + 1_000_000,
     );
@@ -242,9 +266,8 @@ fn compute_from_surfaces(
     };
     let target = warp::Target::new(cur_surfaces, &coords, &column_time);
     let offset_ns = current.stamp_ns - previous.stamp_ns;
-    let span = (start_ns, end_ns);
-    let estimated = wants_motion_estimate(config, &geometry, &pair.motion)
-        .then(|| {
+    let estimated = if wants_motion_estimate(config, &geometry, &pair.motion) {
+        timed(&mut times.motion_estimate_s, || {
             egomotion::estimate_motion(
                 pair,
                 &source,
@@ -256,17 +279,27 @@ fn compute_from_surfaces(
                 first_guess,
             )
         })
-        .flatten();
-    let motion = estimated.as_ref().map_or(&pair.motion, |(m, _)| m);
-    let ego_estimate = estimated.as_ref().map(|(_, e)| *e);
+    } else {
+        None
+    };
+    let (motion, ego_estimate, estimate_render) = match estimated {
+        Some(e) => (e.motion, Some(e.estimate), e.rendered),
+        None => (pair.motion.clone(), None, None),
+    };
+    let motion = &motion;
     let (rotate, rotation, full) = trajectories(config, motion, span)?;
-    let (rotated, moved) = rayon::join(
-        || warp::render(&source, &target, &geometry, &rotation, offset_ns),
-        || {
-            full.as_ref()
-                .map(|t| warp::render(&source, &target, &geometry, t, offset_ns))
-        },
-    );
+    // The ego render: the estimate's last one where it was made with the
+    // estimated motion (the same trajectory), else made here.
+    let (rotated, moved) = timed(&mut times.renders_s, || {
+        rayon::join(
+            || warp::render(&source, &target, &geometry, &rotation, offset_ns),
+            || match (estimate_render, full.as_ref()) {
+                (Some(rendered), Some(_)) => Some(rendered),
+                (_, full) => full.map(|t| warp::render(&source, &target, &geometry, t, offset_ns)),
+            },
+        )
+    });
+    let started = std::time::Instant::now();
     let cells = per_cell(
         config,
         &geometry,
@@ -280,7 +313,7 @@ fn compute_from_surfaces(
         ego_velocity: full.is_some(),
         rotation_compensated: rotate,
     };
-    Some(pair_looming(
+    let mut looming = pair_looming(
         config,
         (current, cur_image, cur_surfaces),
         geometry,
@@ -288,7 +321,10 @@ fn compute_from_surfaces(
         cells,
         availability,
         ego_estimate,
-    ))
+    );
+    times.cells_s = started.elapsed().as_secs_f64();
+    looming.stage_times = times;
+    Some(looming)
 }
 
 /// Whether to estimate what no source measured of the pair's motion. Not on
@@ -371,6 +407,7 @@ fn pair_looming(
         dt_s: cells.dt_s,
         l_ego,
         point_threat,
+        stage_times: StageTimes::default(),
     }
 }
 

@@ -33,6 +33,36 @@ pub struct Availability {
     pub rotation_compensated: bool,
 }
 
+/// Wall time of the engine's stages for one pair, seconds (each stage uses
+/// both cores where it can). For the speed work (docs/performance.md): the
+/// run summary sums them per sensor.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StageTimes {
+    /// The pair's image geometry, the scans gridded, the lasers' offsets.
+    pub range_images_s: f64,
+    /// Plane fits of the scans not cached (`Surfaces::estimate`).
+    pub plane_fits_s: f64,
+    /// Cell times, ray coordinates and column times.
+    pub cell_times_s: f64,
+    /// The motion estimated from the scans (its renders included).
+    pub motion_estimate_s: f64,
+    /// The renders of the previous surface (rotated and ego-moved).
+    pub renders_s: f64,
+    /// Per-cell differences, masks, moving, fusion, `L_ego`, threat.
+    pub cells_s: f64,
+}
+
+impl StageTimes {
+    pub fn add(&mut self, other: &StageTimes) {
+        self.range_images_s += other.range_images_s;
+        self.plane_fits_s += other.plane_fits_s;
+        self.cell_times_s += other.cell_times_s;
+        self.motion_estimate_s += other.motion_estimate_s;
+        self.renders_s += other.renders_s;
+        self.cells_s += other.cells_s;
+    }
+}
+
 /// Everything the engine computed for one pair, reported on the current scan.
 #[derive(Debug, Clone)]
 pub struct PairLooming {
@@ -88,4 +118,6 @@ pub struct PairLooming {
     pub angular_velocity_radps: Option<[f64; 3]>,
     /// The motion estimated from the static world, where a source was missing.
     pub ego_estimate: Option<egomotion::EgoEstimate>,
+    /// How long the engine's stages took on this pair.
+    pub stage_times: StageTimes,
 }

@@ -147,7 +147,7 @@ fn geometry_of(returns: &[[f64; 3]]) -> (f64, [f64; 3], [f64; 3], [f64; 3]) {
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
         .collect();
-    ranges.sort_by(f64::total_cmp);
+    ranges.sort_unstable_by(f64::total_cmp);
     let nearest_range_m = ranges
         .get((ranges.len().saturating_sub(1)) / 10)
         .copied()
@@ -192,7 +192,7 @@ fn looming_if_static(
     if by_range.is_empty() {
         return None;
     }
-    by_range.sort_by(|a, b| a.0.total_cmp(&b.0));
+    by_range.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let nearest = ((by_range.len() as f64 * NEAREST_SHARE).ceil() as usize).max(1);
     let mut values: Vec<(f64, [f64; 3])> = by_range[..nearest]
         .iter()
@@ -201,7 +201,7 @@ fn looming_if_static(
             (dot / (r * r), p)
         })
         .collect();
-    values.sort_by(|a, b| a.0.total_cmp(&b.0));
+    values.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let (looming_per_s, at) = values[values.len() / 2];
     let model = 0.01 * looming_per_s.abs() + 0.005;
     let sigma = estimate.map_or(model, |estimate| {
@@ -281,7 +281,8 @@ fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, 
 
 /// The value at which half the weight lies on either side.
 fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
-    values.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Unstable: equal values' weights add up the same in any order.
+    values.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let half = values.iter().map(|v| v.1).sum::<f64>() / 2.0;
     let mut seen = 0.0;
     for &(value, weight) in values.iter() {
@@ -318,6 +319,7 @@ mod tests {
             velocity_mps: [5.0, 0.0, 0.0],
             angular_velocity_radps: [0.0; 3],
             inlier_cells: 1000,
+            renders: 1,
             residual_m: 0.02,
             velocity_estimated: true,
             rotation_estimated: true,
