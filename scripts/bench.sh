@@ -14,6 +14,11 @@
 #   $BENCH_DIR/bench-table.md, and per resolution to $BENCH_DIR/BxC/).
 #   The full run takes ~12 minutes on 2 cores and needs ~10 GB free in BENCH_DIR.
 #
+# First, the real logs of ../shared/real-data (BENCH_REAL_DIR; BENCH_REAL=0
+# skips them): each copied and processed BENCH_REAL_RUNS times (3), medians;
+# scans/s and the ratio to the copy. Every run's table ends with the time
+# per pair of each stage (the run summary's `annotation.stages`).
+#
 # Environment:
 #   BENCH_DIR       working directory (default target/bench); relative paths
 #                   are taken from the repository root
@@ -99,10 +104,12 @@ fi
 
 # table DIR BEAMS COLUMNS: the Markdown tables of one resolution's runs.
 table() {
-  python3 - "$1" "$(nproc)" "$2" "$3" <<'PY'
+  python3 - "$1" "$(nproc)" "$2" "$3" "$root" <<'PY'
 import json, sys
 d, cores, beams, columns = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
 SCAN_HZ = 10.0
+
+exec(open(f"{sys.argv[5]}/scripts/bench_stages.py").read())
 
 def read_time(name):
     wall, cpu, rss = open(f"{d}/{name}.time").read().split()
@@ -155,6 +162,9 @@ for label, r in runs[1:]:
     warnings = len(s["warnings"]) + len(s["input_report"]["warnings"])
     print(f"| {label} | {s['pairs_written']} | {a['events']} | {a['engine_s']:.1f} | "
           f"{a['engine_s'] / wall:.2f} | {wall / s['pairs_written']:.3f} | {s['bad_messages']} | {warnings} |")
+
+print()
+print(stage_table([(label, summaries[r]) for label, r in runs[1:]]))
 
 inp = read_sizes("input")
 lidar = inp["/lidar/points"][1]
@@ -217,7 +227,57 @@ measure_resolution() {
 }
 
 
+# The real logs (BENCH_REAL_DIR, default ../shared/real-data beside the
+# repository; skipped when absent): each copied and processed
+# BENCH_REAL_RUNS times in turn (default 3), medians reported.
+measure_real() {
+  local real_dir=${BENCH_REAL_DIR:-$root/../shared/real-data} runs=${BENCH_REAL_RUNS:-3}
+  [ -d "$real_dir" ] || { log "no real logs at $real_dir: skipped"; return; }
+  local rdir=$dir/real
+  mkdir -p "$rdir"
+  for log_path in "$real_dir"/*.mcap; do
+    local name
+    name=$(basename "$log_path" .mcap)
+    for k in $(seq "$runs"); do
+      log "real log $name, run $k of $runs"
+      measure "real/$name.copy.$k" "$copy" "$log_path" "$rdir/copy.mcap" >&2
+      measure "real/$name.process.$k" "$looming" process "$log_path" -o "$rdir/process.mcap" \
+        --force -q --json-summary "$rdir/$name.json" >&2
+    done
+    stat -c %s "$log_path" > "$rdir/$name.bytes"
+  done
+  rm -f "$rdir/copy.mcap" "$rdir/process.mcap"
+  python3 - "$rdir" "$runs" "$root" <<'PY'
+import glob, json, os, statistics, sys
+d, runs, root = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+exec(open(f"{root}/scripts/bench_stages.py").read())
+def wall(name, run, k):
+    return float(open(f"{d}/{name}.{run}.{k}.time").read().split()[0])
+rows, stages = [], []
+for path in sorted(glob.glob(f"{d}/*.json")):
+    name = os.path.basename(path)[:-5]
+    s = json.load(open(path))
+    scans = s["decoded"]["scans"]
+    copy = statistics.median(wall(name, "copy", k) for k in range(1, runs + 1))
+    proc = statistics.median(wall(name, "process", k) for k in range(1, runs + 1))
+    rows.append(f"| {name} | {scans} | {copy:.2f} | {proc:.2f} | {scans / proc:.1f} | {copy / proc:.2f} |")
+    stages.append((name, s))
+print(f"Real logs: medians of {runs} runs each, copy and process in turn.")
+print()
+print("| log | scans | copy wall s | process wall s | scans/s | throughput / copy |")
+print("|---|---|---|---|---|---|")
+print("\n".join(rows))
+print()
+print(stage_table(stages))
+PY
+}
+
 : > "$dir/bench-table.md"
+if [ "${BENCH_REAL:-1}" = 1 ]; then
+  measure_real > "$dir/real-table.md"
+  cat "$dir/real-table.md" >> "$dir/bench-table.md"
+  echo >> "$dir/bench-table.md"
+fi
 for resolution in ${BENCH_RESOLUTIONS:-32x512 64x2048}; do
   measure_resolution "${resolution%x*}" "${resolution#*x}"
   cat "$rdir/bench-table.md" >> "$dir/bench-table.md"

@@ -6,6 +6,7 @@
 pub mod colour;
 pub mod foxglove;
 pub mod objects;
+mod overlap;
 pub mod pairs;
 pub mod topics;
 
@@ -14,7 +15,7 @@ use std::time::Instant;
 use ::foxglove::Encode;
 use prost::Message;
 
-use crate::engine::{EngineCache, EngineConfig, PairLooming, compute_with_cache};
+use crate::engine::{EngineCache, EngineConfig, PairLooming};
 use crate::events::{EVENT_SCHEMA, EventConfig, EventDetector, NearMissEvent, PairFrame};
 use crate::model::ScanPair;
 use crate::objects::{ObjectConfig, ObjectTracker, PairObjects};
@@ -22,6 +23,7 @@ use crate::output::OwnChannelSpec;
 use crate::quality::PairQuality;
 
 pub use self::foxglove::FieldSet;
+pub use self::overlap::{Annotated, StageSeconds};
 
 pub use self::topics::{
     DISAGREEMENT_TOPIC, EVENTS_TOPIC, IMAGE_DISAGREEMENT_TOPIC, IMAGE_FUSED_TOPIC, LOG_TOPIC,
@@ -236,6 +238,8 @@ pub struct AnnotateStats {
     pub images_not_encoded: u64,
     /// Time spent in the engine, seconds.
     pub engine_s: f64,
+    /// Time per stage, seconds (the engine's and the rest's).
+    pub stages: StageSeconds,
     /// Smallest event cluster used, cells.
     pub event_min_cells: Option<usize>,
 }
@@ -256,6 +260,7 @@ impl AnnotateStats {
         self.events += other.events;
         self.images_not_encoded += other.images_not_encoded;
         self.engine_s += other.engine_s;
+        self.stages.add(&other.stages);
         self.event_min_cells = match (self.event_min_cells, other.event_min_cells) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
@@ -274,6 +279,9 @@ pub struct Annotator {
     stats: AnnotateStats,
     quality: Option<PairQuality>,
     tracker: ObjectTracker,
+    /// The pair the engine finished last, waiting for
+    /// [`Annotator::complete`] beside the engine's next pair.
+    pending: Option<(ScanPair, Option<PairLooming>)>,
     /// Events are kept, not written: on a log with several LiDARs the
     /// sensors' events are merged into one list at the end.
     hold_events: bool,
@@ -295,6 +303,7 @@ impl Annotator {
             stats: AnnotateStats::default(),
             quality: None,
             tracker: ObjectTracker::default(),
+            pending: None,
             hold_events: false,
             event_writer: EventWriter::new(&EVENT_CHANNELS.map(|c| ids[c as usize])),
         }
@@ -315,25 +324,19 @@ impl Annotator {
         &self.events
     }
 
-    /// The quality figures of the pair last annotated (`None` when the engine
-    /// made no image of it), for its `/looming/pairs` message; taken once.
-    pub fn take_quality(&mut self) -> Option<PairQuality> {
-        self.quality.take()
-    }
-
-    /// The messages of one pair (and of the events that ended before it).
-    /// Its quality figures are then in [`Annotator::take_quality`].
-    pub fn annotate(&mut self, pair: &ScanPair) -> Vec<OwnMessage> {
-        let started = Instant::now();
-        let looming = compute_with_cache(pair, &self.config.engine, &mut self.cache);
-        self.stats.engine_s += started.elapsed().as_secs_f64();
+    /// Everything after the engine for one pair: its objects, quality
+    /// figures, events and messages (and those of the events that ended
+    /// before it). `looming`: the engine's result, `None` when it made no
+    /// image of the pair.
+    fn complete(&mut self, pair: &ScanPair, looming: Option<PairLooming>) -> Annotated {
         self.quality = None;
         let Some(mut looming) = looming else {
             self.stats.pairs_without_image += 1;
-            return Vec::new();
+            return Annotated::default();
         };
         // The objects' looming fed back into their cells before anything is
         // judged or drawn from the fused looming.
+        let started = Instant::now();
         let (objects, fusion) = PairObjects::find_tracked_fused(
             &pair.current,
             &mut looming,
@@ -341,6 +344,8 @@ impl Annotator {
             &mut self.tracker,
             pair.dt_s,
         );
+        self.stats.stages.objects_s += started.elapsed().as_secs_f64();
+        let started = Instant::now();
         self.stats.cells_fused_with_object += fusion.combined as u64;
         self.stats.cells_filled_from_object += fusion.filled as u64;
         self.quality = Some(PairQuality::measure_on_ground(
@@ -371,8 +376,14 @@ impl Annotator {
         for event in ended {
             self.push_event(event, &mut out);
         }
+        self.stats.stages.quality_and_events_s += started.elapsed().as_secs_f64();
+        let started = Instant::now();
         self.push_scan_messages(pair, &looming, &objects, &mut out);
-        out
+        self.stats.stages.messages_s += started.elapsed().as_secs_f64();
+        Annotated {
+            messages: out,
+            quality: self.quality.take(),
+        }
     }
 
     /// End of the stream: the events still open.

@@ -8,8 +8,8 @@ use std::sync::mpsc::SyncSender;
 use crate::annotate::pairs::{PairRecord, pairs_channel_spec};
 use crate::annotate::topics::{PAIRS_TOPIC, sensor_topic};
 use crate::annotate::{
-    AnnotateStats, Annotator, EventWriter, OwnMessage, channel_specs, event_channel_specs,
-    sensor_channel_ids, sensor_channel_specs,
+    AnnotateStats, Annotated, Annotator, EventWriter, OwnMessage, channel_specs,
+    event_channel_specs, sensor_channel_ids, sensor_channel_specs,
 };
 use crate::events::{NearMissEvent, SensorEvents, merge_sensor_events};
 use crate::model::{ExtrinsicSource, ScanPair};
@@ -205,7 +205,7 @@ impl Annotation {
             let Some(sensor) = self.sensors.get_mut(sensor) else {
                 continue;
             };
-            if !sensor.emit(&pair, tx) {
+            if !sensor.emit(pair, tx) {
                 return false;
             }
         }
@@ -220,6 +220,11 @@ impl Annotation {
         tree: Option<&TransformTree>,
     ) -> Vec<NearMissEvent> {
         for sensor in &mut self.sensors {
+            if let Some((pair, annotated)) = sensor.annotator.flush()
+                && !sensor.send(&pair, annotated, tx)
+            {
+                return Vec::new();
+            }
             for message in sensor.annotator.finish() {
                 if tx.send(ToWriter::Own(message)).is_err() {
                     return Vec::new();
@@ -290,8 +295,10 @@ impl Annotation {
 }
 
 impl SensorAnnotation {
-    /// Annotate one pair and send its messages; false when the writer has gone.
-    fn emit(&mut self, pair: &ScanPair, tx: &SyncSender<ToWriter>) -> bool {
+    /// Annotate one pair and send the messages of the one before it (the
+    /// engine takes a pair while the one before is completed beside it);
+    /// false when the writer has gone.
+    fn emit(&mut self, pair: ScanPair, tx: &SyncSender<ToWriter>) -> bool {
         if let Some(extrinsic) = pair
             .motion
             .velocity_extrinsic
@@ -308,11 +315,17 @@ impl SensorAnnotation {
                 false,
             ));
         }
-        // The pair's quality figures come from its annotation; its
-        // record still goes out first.
-        let annotation = self.annotator.annotate(pair);
+        match self.annotator.push_pair(pair) {
+            Some((done, annotated)) => self.send(&done, annotated, tx),
+            None => true,
+        }
+    }
+
+    /// A completed pair's record, then its messages (the record carries the
+    /// quality figures of its annotation but still goes out first).
+    fn send(&mut self, pair: &ScanPair, annotated: Annotated, tx: &SyncSender<ToWriter>) -> bool {
         let mut record = PairRecord::from_pair(pair);
-        record.quality = self.annotator.take_quality();
+        record.quality = annotated.quality;
         let data = serde_json::to_vec(&record).expect("pair records always serialise");
         let item = ToWriter::Own(OwnMessage {
             channel_id: self.pairs_channel,
@@ -324,7 +337,8 @@ impl SensorAnnotation {
         if tx.send(item).is_err() {
             return false;
         }
-        annotation
+        annotated
+            .messages
             .into_iter()
             .all(|message| tx.send(ToWriter::Own(message)).is_ok())
     }

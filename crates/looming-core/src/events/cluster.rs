@@ -128,10 +128,26 @@ pub fn hot_clusters(
                 && position(cell).is_some()
         })
         .collect();
-    connected_components(geometry, &hot)
+    let components: Vec<Vec<usize>> = connected_components(geometry, &hot)
         .into_iter()
         .filter(|cells| cells.len() >= min_cells)
-        .map(|cells| describe(looming, (corridor, objects), &cells, &position))
+        .collect();
+    // Each object's cells, gathered in one pass (only when a cluster needs
+    // an object's footprint).
+    let object_cells = objects
+        .filter(|_| !components.is_empty())
+        .map(cells_by_object)
+        .unwrap_or_default();
+    components
+        .into_iter()
+        .map(|cells| {
+            describe(
+                looming,
+                (corridor, objects, &object_cells),
+                &cells,
+                &position,
+            )
+        })
         // An object covers an area; a line of cells one beam or one column
         // wide is the trace of an edge or of the sweep's seam.
         .filter(|cluster| cluster.rows.1 > cluster.rows.0 && cluster.cols.len >= 2)
@@ -255,9 +271,20 @@ fn connected_components(geometry: &ImageGeometry, hot: &[bool]) -> Vec<Vec<usize
     components
 }
 
+/// Per object (index in `objects.objects`), its cells.
+fn cells_by_object(objects: &PairObjects) -> Vec<Vec<usize>> {
+    let mut cells = vec![Vec::new(); objects.objects.len()];
+    for (cell, &object) in objects.cell_object.iter().enumerate() {
+        if let Some(list) = cells.get_mut(object as usize) {
+            list.push(cell);
+        }
+    }
+    cells
+}
+
 fn describe(
     looming: &PairLooming,
-    (corridor, objects): (&Corridor, Option<&PairObjects>),
+    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &[Vec<usize>]),
     cells: &[usize],
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> Cluster {
@@ -293,7 +320,8 @@ fn describe(
         // one beside it never, whichever of its parts is hot.
         Some((objects, index)) => {
             let horizon_s = (1.0 / values[values.len() / 2]).clamp(0.0, PREDICTION_HORIZON_S);
-            object_offset_m(objects, index, (corridor, horizon_s), position)
+            let cells = object_cells.get(index).map_or(&[][..], Vec::as_slice);
+            object_offset_m(objects, (index, cells), (corridor, horizon_s), position)
         }
         None => points
             .iter()
@@ -343,17 +371,11 @@ fn dominant_object<'o>(
 /// walking into the lane is in the path before it reaches it.
 fn object_offset_m(
     objects: &PairObjects,
-    index: usize,
+    (index, cells): (usize, &[usize]),
     (corridor, horizon_s): (&Corridor, f64),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> f64 {
-    let points: Vec<Vector3<f64>> = objects
-        .cell_object
-        .iter()
-        .enumerate()
-        .filter(|&(_, &o)| o as usize == index)
-        .filter_map(|(cell, _)| position(cell))
-        .collect();
+    let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&cell| position(cell)).collect();
     let offset_after = |shift: Vector3<f64>| {
         points
             .iter()

@@ -72,9 +72,17 @@ impl Corridor {
         // The circle's centre is at (0, 1/k); the path point at arc length s
         // is (sin(ks)/k, (1 - cos(ks))/k).
         let (du, dv) = (along, left - 1.0 / k);
+        let from_circle_m = ((du * du + dv * dv).sqrt() - 1.0 / k.abs()).abs();
+        // The arc to the point's foot is at most pi times the point's
+        // distance from the sensor (the chord to the foot is at most twice
+        // that distance, and an arc at most pi/2 times its chord), so near
+        // points need no angle (this runs for every cell of every cluster).
+        if std::f64::consts::PI * (along * along + left * left).sqrt() <= REACH_M {
+            return from_circle_m;
+        }
         let arc_m = (du * k).atan2(-dv * k) / k;
         if arc_m.abs() <= REACH_M {
-            return (du.hypot(dv) - 1.0 / k.abs()).abs();
+            return from_circle_m;
         }
         [-REACH_M, REACH_M]
             .iter()

@@ -40,7 +40,7 @@ impl GroundFit {
     pub fn find(looming: &PairLooming, scan: &Scan) -> Option<Self> {
         let candidates = ground_candidates(looming, scan);
         let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
-        heights.sort_by(f64::total_cmp);
+        heights.sort_unstable_by(f64::total_cmp);
         let height = *heights.get(heights.len() / 2)?;
         let height = if heights.len().is_multiple_of(2) {
             0.5 * (height + heights[heights.len() / 2 - 1])

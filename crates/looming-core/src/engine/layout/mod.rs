@@ -242,12 +242,14 @@ fn circular_mean_turn(turns: impl Iterator<Item = f64>) -> f64 {
     s.atan2(c) / TAU
 }
 
+/// The upper median (the middle value of an odd count), by selection: the
+/// layout takes it for every scan, on lists of a whole scan's steps.
 fn median(values: &mut [f64]) -> Option<f64> {
     if values.is_empty() {
         return None;
     }
-    values.sort_by(f64::total_cmp);
-    Some(values[values.len() / 2])
+    let mid = values.len() / 2;
+    Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 #[cfg(test)]
