@@ -621,6 +621,7 @@ mod tests {
             skipped_invalid_points: 0,
             organized: None,
             layout: ScanLayout::from_fields(Some("ring"), None),
+            sensor_ids: None,
         }
     }
 
