@@ -84,26 +84,7 @@ fn a_merged_cloud_is_split_by_its_sensor_field_into_three_sensors() {
         assert!(trusted > 0.6, "{}: {trusted}", sensor["sensor"]);
     }
 
-    // The fleet's record has each sensor's trust.
-    let logs = dir.join("logs");
-    std::fs::create_dir_all(&logs).unwrap();
-    std::fs::copy(&input, logs.join("merged.mcap")).unwrap();
-    let fleet_dir = dir.join("fleet");
-    let run = common::looming(&[
-        "batch",
-        logs.to_str().unwrap(),
-        "-o",
-        fleet_dir.to_str().unwrap(),
-        "-q",
-    ]);
-    assert!(run.status.success(), "{}", stderr(&run));
-    let fleet = json(&fleet_dir.join("fleet.json"));
-    let log = &fleet[0];
-    assert_eq!(log["events"], 1, "{log}");
-    let sensors = log["quality"]["sensors"]
-        .as_array()
-        .expect("each sensor's trust");
-    assert_eq!(sensors.len(), 3, "{log}");
+    assert_fleet_record(&dir, &input);
 
     // Without /tf_static the sensors are found from their rings' geometry.
     let no_tf = dir.join("no-tf.mcap");
@@ -117,6 +98,25 @@ fn a_merged_cloud_is_split_by_its_sensor_field_into_three_sensors() {
     assert!(run.status.success(), "{}", stderr(&run));
     assert_origins(&json(&no_tf_summary), "geometry", 0.05);
 
+    assert_whole_cloud_flagged(&dir, &input);
+}
+
+/// `batch`'s fleet record of the merged log has each sensor's trust.
+fn assert_fleet_record(dir: &Path, input: &Path) {
+    let logs = dir.join("logs");
+    std::fs::create_dir_all(&logs).unwrap();
+    std::fs::copy(input, logs.join("merged.mcap")).unwrap();
+    let fleet = common::looming_batch(&logs, &dir.join("fleet"));
+    let log = &fleet[0];
+    assert_eq!(log["events"], 1, "{log}");
+    let sensors = log["quality"]["sensors"]
+        .as_array()
+        .expect("each sensor's trust");
+    assert_eq!(sensors.len(), 3, "{log}");
+}
+
+/// With `--split-field none` the merged cloud is one sensor, flagged.
+fn assert_whole_cloud_flagged(dir: &Path, input: &Path) {
     // Kept whole, the merged cloud is flagged as before.
     let whole = dir.join("whole.mcap");
     let whole_summary = dir.join("whole.json");
@@ -126,7 +126,7 @@ fn a_merged_cloud_is_split_by_its_sensor_field_into_three_sensors() {
         "--json-summary",
         whole_summary.to_str().unwrap(),
     ];
-    let run = looming_process(&input, &whole, &args);
+    let run = looming_process(input, &whole, &args);
     assert!(run.status.success(), "{}", stderr(&run));
     let summary = json(&whole_summary);
     assert!(summary["sensors"].as_array().is_none_or(Vec::is_empty));

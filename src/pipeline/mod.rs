@@ -143,7 +143,7 @@ pub fn process(
                 });
             }
         };
-        let (sensors, split_warnings) = split::expand(&input, &config.scans, sensors)?;
+        let (sensors, split_warnings) = split::expand(&input, &config.scans, sensors);
         let write_mode = choose_write_mode(config, &input);
         let outcome = run_once(config, &input, &sensors, &write_mode, progress)?;
         // IndexedReader silently skips messages outside chunks: if the count

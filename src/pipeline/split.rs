@@ -8,7 +8,7 @@
 use std::collections::BTreeMap;
 
 use crate::decode::SensorField;
-use crate::input::{InputError, InputFile, InputRecord};
+use crate::input::{InputFile, InputRecord};
 use crate::model::Decoded;
 use crate::pairing::split::{MAX_SENSORS, Split, distinct_ids};
 use crate::topics::TopicSelection;
@@ -19,6 +19,10 @@ use super::scans::{Decoder, ScanOptions};
 /// first clouds hold every sensor it merges (a second at 10-20 Hz), and a
 /// driver serving several on one topic publishes each within a period.
 const DISCOVERY_CLOUDS: usize = 20;
+/// Log time read at most for them, ns: a topic silent that long from the
+/// log's first message is left whole (a log without clouds is not read
+/// twice).
+const DISCOVERY_WINDOW_NS: u64 = 10_000_000_000;
 
 /// What the first clouds of one LiDAR topic showed.
 #[derive(Default)]
@@ -40,12 +44,12 @@ pub(super) fn expand(
     input: &InputFile,
     options: &ScanOptions,
     sensors: Vec<TopicSelection>,
-) -> Result<(Vec<TopicSelection>, Vec<String>), InputError> {
+) -> (Vec<TopicSelection>, Vec<String>) {
     let choice = &options.decode_limits.sensor_field;
     if *choice == SensorField::Off || sensors.iter().all(|s| s.lidar.is_none()) {
-        return Ok((sensors, Vec::new()));
+        return (sensors, Vec::new());
     }
-    let seen = first_clouds(input, options, &sensors)?;
+    let seen = first_clouds(input, options, &sensors);
     let mut expanded = Vec::new();
     let mut warnings = Vec::new();
     for selection in sensors {
@@ -74,7 +78,7 @@ pub(super) fn expand(
             _ => expanded.push(selection),
         }
     }
-    Ok((expanded, warnings))
+    (expanded, warnings)
 }
 
 /// The sensor field and values of each LiDAR topic's first clouds (at most
@@ -84,7 +88,7 @@ fn first_clouds(
     input: &InputFile,
     options: &ScanOptions,
     sensors: &[TopicSelection],
-) -> Result<BTreeMap<u16, Seen>, InputError> {
+) -> BTreeMap<u16, Seen> {
     let lidars: Vec<TopicSelection> = sensors
         .iter()
         .map(|s| TopicSelection {
@@ -98,10 +102,15 @@ fn first_clouds(
         .iter()
         .filter_map(|s| Some((s.lidar.as_ref()?.channel_id, Seen::default())))
         .collect();
+    let mut first_log_time_ns = None;
     let mut sink = |record: InputRecord| {
         let InputRecord::Message(message) = record else {
             return std::ops::ControlFlow::Continue(());
         };
+        let first = *first_log_time_ns.get_or_insert(message.log_time_ns);
+        if message.log_time_ns.saturating_sub(first) > DISCOVERY_WINDOW_NS {
+            return std::ops::ControlFlow::Break(());
+        }
         let Some(entry) = seen.get_mut(&message.channel_id).filter(|e| !e.done) else {
             return std::ops::ControlFlow::Continue(());
         };
@@ -126,11 +135,11 @@ fn first_clouds(
             std::ops::ControlFlow::Continue(())
         }
     };
-    match input.read_records(false, &mut sink) {
-        // Stopped once every topic was seen: the rest is the run's to read.
-        Ok(_) | Err(InputError::Stopped) => Ok(seen),
-        Err(error) => Err(error),
-    }
+    // Stopped once every topic was seen (the rest is the run's to read); a
+    // file that cannot be read is the run's to report, as it would be
+    // without merged clouds.
+    let _ = input.read_records(false, &mut sink);
+    seen
 }
 
 /// The distinct values of both lists, at most [`MAX_SENSORS`].

@@ -105,7 +105,7 @@ fn extract_with<X: XyzRead>(
     let mut ring = readers.ring.map(|_| Vec::with_capacity(n));
     let mut time_offset_s = readers.time.map(|_| Vec::with_capacity(n));
     let mut sensor_ids = readers.sensor.as_ref().map(|_| Vec::with_capacity(n));
-    // A sensor value that is negative or above u32: the field is no sensor field.
+    // A negative sensor value (or one above u32): no sensor field.
     let mut bad_sensor = false;
     let time_conv = readers
         .time
@@ -181,12 +181,16 @@ fn extract_with<X: XyzRead>(
         skipped_invalid_points: skipped,
         organized: (layout.rows > 1).then_some((layout.rows as u32, layout.cols as u32)),
         layout: scan_layout,
-        sensor_ids: match (sensor_ids, &readers.sensor) {
-            (Some(ids), Some((_, field))) if !bad_sensor => Some(SensorIds {
-                field: field.clone(),
-                ids,
-            }),
-            _ => None,
-        },
+        sensor_ids: sensor_ids_of(sensor_ids.filter(|_| !bad_sensor), readers),
     }
+}
+
+/// The sensor field's values with its name (`None` without the field, or
+/// when a value was no sensor number).
+fn sensor_ids_of(ids: Option<Vec<u32>>, readers: &Readers) -> Option<SensorIds> {
+    let (_, field) = readers.sensor.as_ref()?;
+    Some(SensorIds {
+        field: field.clone(),
+        ids: ids?,
+    })
 }

@@ -84,17 +84,7 @@ impl Channels {
                 ros_schemas::point_cloud2(d),
             )
         };
-        // LiDARs sharing a topic (`--one-topic`) share its channel.
-        let mut by_topic = std::collections::BTreeMap::new();
-        let mut clouds = Vec::with_capacity(rig.len());
-        for lidar in rig {
-            let id = match by_topic.get(&lidar.topic) {
-                Some(&id) => id,
-                None => add(cloud(&lidar.topic))?,
-            };
-            by_topic.insert(lidar.topic.clone(), id);
-            clouds.push(id);
-        }
+        let clouds = per_topic(rig, |topic| add(cloud(topic)))?;
         let imu = add(OwnChannelSpec::ros2(
             topics::IMU,
             "sensor_msgs",
@@ -158,6 +148,25 @@ impl Channels {
             tf,
         })
     }
+}
+
+/// A channel per distinct topic of `rig`'s LiDARs (those sharing one,
+/// `--one-topic`, share its channel), each LiDAR's in rig order.
+fn per_topic(
+    rig: &[RigLidar],
+    mut add: impl FnMut(&str) -> Result<u16, OutputError>,
+) -> Result<Vec<u16>, OutputError> {
+    let mut by_topic = std::collections::BTreeMap::new();
+    let mut clouds = Vec::with_capacity(rig.len());
+    for lidar in rig {
+        let id = match by_topic.get(&lidar.topic) {
+            Some(&id) => id,
+            None => add(&lidar.topic)?,
+        };
+        by_topic.insert(lidar.topic.clone(), id);
+        clouds.push(id);
+    }
+    Ok(clouds)
 }
 
 /// One encoded message for the writer.
