@@ -75,6 +75,15 @@ pub(super) fn expand(
                 }
                 expanded.extend(selection.per_merged_sensor(field, ids));
             }
+            Some(Seen { field: None, .. }) if named => {
+                if let SensorField::Named(name) = choice {
+                    warnings.push(format!(
+                        "--split-field {name}: the clouds of {} have no integer field {name}; they are kept whole",
+                        lidar.topic
+                    ));
+                }
+                expanded.push(selection);
+            }
             _ => expanded.push(selection),
         }
     }
