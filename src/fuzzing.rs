@@ -50,6 +50,7 @@ pub fn message(kind: MessageKind, data: &[u8]) {
     let is_static = selector & 2 != 0;
     let limits = DecodeLimits {
         max_points: MAX_POINTS,
+        ..DecodeLimits::default()
     };
     let _ = decode(kind, encoding, is_static, payload, &limits);
 }

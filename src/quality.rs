@@ -636,6 +636,7 @@ mod tests {
             skipped_invalid_points: 0,
             organized: None,
             layout: Default::default(),
+            sensor_ids: None,
         }
     }
 

@@ -79,6 +79,19 @@ pub struct TopicSelection {
     pub velocity: Option<SelectedChannel>,
     /// Every `/tf` and `/tf_static` channel.
     pub tf: Vec<SelectedChannel>,
+    /// The one sensor of the LiDAR channel's merged clouds this selection
+    /// takes (`pipeline` splits them by their sensor field); `None`: the
+    /// channel's clouds whole.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub merged: Option<MergedSensor>,
+}
+
+/// One sensor of a LiDAR topic whose clouds merge several: the cloud's
+/// per-point sensor field and this sensor's value in it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct MergedSensor {
+    pub field: String,
+    pub id: u32,
 }
 
 impl TopicSelection {
@@ -89,7 +102,22 @@ impl TopicSelection {
             imu: None,
             velocity: None,
             tf: Vec::new(),
+            merged: None,
         }
+    }
+
+    /// This selection once per sensor of its merged clouds: `field`'s
+    /// values `ids`.
+    pub fn per_merged_sensor(&self, field: &str, ids: &[u32]) -> Vec<TopicSelection> {
+        ids.iter()
+            .map(|&id| TopicSelection {
+                merged: Some(MergedSensor {
+                    field: field.to_owned(),
+                    id,
+                }),
+                ..self.clone()
+            })
+            .collect()
     }
 
     /// All selected channels.
@@ -187,6 +215,7 @@ pub fn select(catalog: &Catalog, overrides: &TopicOverrides) -> Result<TopicSele
         imu,
         velocity,
         tf,
+        merged: None,
     })
 }
 
@@ -242,6 +271,7 @@ pub fn select_sensors(
             imu: imu.clone(),
             velocity: velocity.clone(),
             tf: tf.clone(),
+            merged: None,
         })
         .collect())
 }
@@ -291,11 +321,27 @@ pub fn sensor_name(topic: &str) -> String {
 /// The sensor names of `topics`, made unique (`_2`, `_3`, ... after a name
 /// already taken).
 pub fn sensor_names(topics: &[&str]) -> Vec<String> {
+    unique(topics.iter().map(|topic| sensor_name(topic)))
+}
+
+/// The sensor names of `sensors`' LiDARs, made unique: a merged cloud's
+/// sensor is its topic's sensor name and its value, `_<id>`
+/// (`/sensing/lidar/concatenated/pointcloud` sensor 2 ->
+/// `sensing_lidar_concatenated_2`).
+pub fn selection_names(sensors: &[TopicSelection]) -> Vec<String> {
+    unique(sensors.iter().filter_map(|s| {
+        let name = sensor_name(&s.lidar.as_ref()?.topic);
+        Some(match &s.merged {
+            Some(merged) => format!("{name}_{}", merged.id),
+            None => name,
+        })
+    }))
+}
+
+fn unique(names: impl Iterator<Item = String>) -> Vec<String> {
     let mut taken = std::collections::BTreeSet::new();
-    topics
-        .iter()
-        .map(|topic| {
-            let base = sensor_name(topic);
+    names
+        .map(|base| {
             let mut name = base.clone();
             let mut k = 2;
             while !taken.insert(name.clone()) {
@@ -404,5 +450,32 @@ mod sensor_name_tests {
             sensor_names(&["/a/points", "/a/cloud", "/b/points"]),
             ["a", "a_2", "b"]
         );
+    }
+
+    #[test]
+    fn a_merged_clouds_sensors_are_named_by_topic_and_value() {
+        let lidar = SelectedChannel {
+            channel_id: 1,
+            topic: "/sensing/lidar/concatenated/pointcloud".into(),
+            role: Role::Lidar,
+            kind: MessageKind::PointCloud2,
+            encoding: WireEncoding::Cdr,
+            schema_name: "sensor_msgs/msg/PointCloud2".into(),
+            message_count: 3,
+        };
+        let whole = TopicSelection {
+            lidar: Some(lidar),
+            ..TopicSelection::none()
+        };
+        let split = whole.per_merged_sensor("sensor_id", &[0, 2]);
+        assert_eq!(split[1].merged.as_ref().map(|m| m.id), Some(2));
+        assert_eq!(
+            selection_names(&split),
+            [
+                "sensing_lidar_concatenated_0",
+                "sensing_lidar_concatenated_2"
+            ]
+        );
+        assert_eq!(selection_names(&[whole]), ["sensing_lidar_concatenated"]);
     }
 }

@@ -1184,6 +1184,7 @@ fn huge_headers_never_allocate() {
     // ...and by the data length when the limit is lifted.
     let limits = DecodeLimits {
         max_points: usize::MAX,
+        ..DecodeLimits::default()
     };
     cloud.height = 1;
     let err = scan_from_pointcloud2(&cloud, &limits).unwrap_err();
@@ -1358,7 +1359,10 @@ impl Rng {
 fn garbage_and_mutated_input_never_panics() {
     use MessageKind as K;
     use WireEncoding as E;
-    let limits = DecodeLimits { max_points: 10_000 };
+    let limits = DecodeLimits {
+        max_points: 10_000,
+        ..DecodeLimits::default()
+    };
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let all = [
         (K::PointCloud2, E::Cdr),
@@ -1521,4 +1525,70 @@ fn organized_shape_is_kept() {
     // One row is not organized.
     let flat = scan_of(&custom_cloud(0, &fields, &values, 1, 0, false));
     assert_eq!(flat.organized, None);
+}
+
+/// A merged cloud's per-point sensor field: read under its usual names with
+/// any integer type, or the one named; a float, negative or absent field,
+/// or `--split-field none`, gives none.
+#[test]
+fn the_sensor_field_of_a_merged_cloud() {
+    use looming::decode::SensorField;
+    let ids = |name: &str, dt: u8, values: [f64; 2], choice: SensorField| {
+        let fields = [
+            ("x", datatype::FLOAT32),
+            ("y", datatype::FLOAT32),
+            ("z", datatype::FLOAT32),
+            (name, dt),
+        ];
+        let rows = vec![
+            vec![1.0, 2.0, 3.0, values[0]],
+            vec![4.0, 5.0, 6.0, values[1]],
+        ];
+        let cloud = custom_cloud(0, &fields, &rows, 1, 0, false);
+        let limits = DecodeLimits {
+            sensor_field: choice,
+            ..DecodeLimits::default()
+        };
+        scan_from_pointcloud2(&cloud, &limits)
+            .unwrap()
+            .sensor_ids
+            .map(|s| (s.field, s.ids))
+    };
+    for dt in [
+        datatype::UINT8,
+        datatype::UINT16,
+        datatype::INT32,
+        datatype::UINT32,
+    ] {
+        let got = ids("sensor_id", dt, [2.0, 0.0], SensorField::Auto);
+        assert_eq!(got, Some(("sensor_id".into(), vec![2, 0])), "datatype {dt}");
+    }
+    let got = ids("lidar_id", datatype::UINT8, [1.0, 3.0], SensorField::Auto);
+    assert_eq!(got, Some(("lidar_id".into(), vec![1, 3])));
+    // A laser's number is no sensor's.
+    assert_eq!(
+        ids("laser_id", datatype::UINT8, [1.0, 3.0], SensorField::Auto),
+        None
+    );
+    assert_eq!(
+        ids(
+            "sensor_id",
+            datatype::FLOAT32,
+            [1.0, 3.0],
+            SensorField::Auto
+        ),
+        None
+    );
+    assert_eq!(
+        ids("sensor_id", datatype::INT16, [-1.0, 3.0], SensorField::Auto),
+        None
+    );
+    assert_eq!(
+        ids("sensor_id", datatype::UINT8, [1.0, 3.0], SensorField::Off),
+        None
+    );
+    let named = SensorField::Named("source".into());
+    let got = ids("source", datatype::UINT16, [7.0, 7.0], named.clone());
+    assert_eq!(got, Some(("source".into(), vec![7, 7])));
+    assert_eq!(ids("sensor_id", datatype::UINT8, [1.0, 3.0], named), None);
 }

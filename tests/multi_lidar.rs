@@ -119,16 +119,7 @@ fn a_batch_mixing_one_and_two_lidar_logs_processes_both_with_each_sensors_trust(
     )
     .unwrap();
     let out = dir.join("fleet");
-    let run = common::looming(&[
-        "batch",
-        logs.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
-    assert!(run.status.success(), "{}", stderr(&run));
-    let fleet: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("fleet.json")).unwrap()).unwrap();
+    let fleet = common::looming_batch(&logs, &out);
     let logs = fleet.as_array().expect("a list of logs");
     assert_eq!(logs.len(), 2);
     for log in logs {

@@ -10,7 +10,7 @@ use super::choices::{
     FieldSet, NoLidarPolicy, OutputCompression, RenderChannel, RenderView, SweepDirection,
 };
 
-use super::resolve::{parse_shard, parse_threat_ttc};
+use super::resolve::{parse_shard, parse_split_field, parse_threat_ttc};
 
 pub(crate) const EXIT_CODES: &str = "\
 Exit codes:
@@ -225,6 +225,13 @@ pub(crate) struct SynthArgs {
     /// Argoverse 2 or Autoware publish) [default: the scenario's, sensor].
     #[arg(long, value_enum)]
     pub(crate) frame: Option<looming::synth::CloudFrame>,
+    /// With several LiDARs: every LiDAR's clouds on one topic,
+    /// /lidars/points, each point tagged with its LiDAR in a `sensor_id`
+    /// (UINT8) field, 0 the roof (as a driver serving several LiDARs on
+    /// one topic publishes them; with --frame vehicle, a merged base_link
+    /// cloud); each cloud is still one LiDAR's scan, published when it ends.
+    #[arg(long)]
+    pub(crate) one_topic: bool,
     /// zstd level of the output chunks (1-22; higher is smaller and slower)
     /// [default: 3].
     #[arg(long, value_name = "LEVEL", value_parser = clap::value_parser!(u32).range(1..=22))]
@@ -354,6 +361,14 @@ pub(crate) struct ScanArgs {
     /// returns' rings; docs/channels.md].
     #[arg(long, value_name = "FRAME")]
     pub(crate) sensor_frame: Option<String>,
+    /// The per-point field that says which sensor each point of a merged
+    /// cloud (several LiDARs on one topic, e.g. a concatenated base_link
+    /// cloud) came from: the cloud is split into one sensor per value, each
+    /// annotated on its own (/looming/<sensor>_<id>/...); `none` keeps a
+    /// merged cloud whole [default: sensor_id, lidar_id, sensor or
+    /// lidar_index, any integer type; docs/channels.md].
+    #[arg(long, value_name = "FIELD|none", default_value = "auto", value_parser = parse_split_field, hide_default_value = true)]
+    pub(crate) split_field: looming::decode::SensorField,
     /// Largest stamp gap between two scans that is still paired, seconds
     /// [default: 3 nominal scan periods].
     #[arg(long, value_name = "SECONDS")]

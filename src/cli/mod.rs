@@ -331,6 +331,7 @@ fn synth(args: SynthArgs) -> Result<(), Failure> {
         realism: None,
         lidars: args.lidars,
         frame: args.frame,
+        one_topic: args.one_topic,
     };
     let summary = looming::synth::synthesize_with(&options, &lidar).map_err(|error| {
         let usage = matches!(

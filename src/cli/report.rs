@@ -91,11 +91,14 @@ fn read_and_decode_lines(out: &mut String, s: &RunSummary) {
     let lidars = if s.sensors.is_empty() {
         topic(&s.topics.lidar)
     } else {
-        s.sensors
+        let mut topics: Vec<&str> = s
+            .sensors
             .iter()
             .map(|sensor| sensor.topic.as_str())
-            .collect::<Vec<_>>()
-            .join(", ")
+            .collect();
+        // A merged topic's sensors share it: named once.
+        topics.dedup();
+        topics.join(", ")
     };
     let _ = writeln!(
         out,
@@ -167,11 +170,15 @@ fn sensor_lines(out: &mut String, s: &RunSummary) {
             || "no transform to the vehicle: its events stand alone".to_string(),
             |frame| format!("events merged in frame {frame}"),
         );
+        let topic = match &sensor.merged {
+            Some(merged) => format!("{} {} {}", sensor.topic, merged.field, merged.id),
+            None => sensor.topic.clone(),
+        };
         let _ = writeln!(
             out,
             "    {:<14} {}: {layout}; {} pairs, {} annotated, engine {:.1} s; {frame}",
             sensor.name,
-            sensor.topic,
+            topic,
             sensor.pairs_written,
             sensor.annotation.pairs_annotated,
             sensor.annotation.engine_s

@@ -28,6 +28,18 @@ fn usage(message: String) -> Failure {
     }
 }
 
+/// `--split-field FIELD|none` (a clap value parser): `auto` (the default)
+/// the usual names, `none` no split.
+pub(crate) fn parse_split_field(text: &str) -> Result<looming::decode::SensorField, String> {
+    use looming::decode::SensorField;
+    match text.trim() {
+        "" => Err("expected a field name, or none".into()),
+        "auto" => Ok(SensorField::Auto),
+        "none" => Ok(SensorField::Off),
+        name => Ok(SensorField::Named(name.to_owned())),
+    }
+}
+
 /// `--threat-ttc LOW,MEDIUM,HIGH` (a clap value parser, so that clap reports
 /// it with the flag).
 pub(crate) fn parse_threat_ttc(text: &str) -> Result<[f64; 3], String> {
@@ -82,6 +94,7 @@ pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
         },
         decode_limits: DecodeLimits {
             max_points: args.max_points,
+            sensor_field: args.split_field.clone(),
         },
         strict: args.strict,
     })

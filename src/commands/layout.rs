@@ -172,10 +172,7 @@ fn several_sensors_target(
         .iter()
         .map(|(name, _, _)| LayoutSensor {
             name: name.clone(),
-            lidar_topic: names
-                .iter()
-                .position(|n| n == name)
-                .map(|k| inputs[k].clone()),
+            lidar_topic: input_of(&names, name).map(|k| inputs[k].clone()),
         })
         .collect();
     Ok(Some(LayoutTarget {
@@ -184,6 +181,16 @@ fn several_sensors_target(
         frame_from: first_topic.clone(),
         sensors,
     }))
+}
+
+/// Which of the input topics' sensor `names` is sensor `name`'s: its own,
+/// else (a sensor split out of a merged cloud, `<sensor>_<id>`) its topic's.
+fn input_of(names: &[String], name: &str) -> Option<usize> {
+    names.iter().position(|n| n == name).or_else(|| {
+        let (base, id) = name.rsplit_once('_')?;
+        id.parse::<u32>().ok()?;
+        names.iter().position(|n| n == base)
+    })
 }
 
 /// The payload of the first message (in log time) on `channel_id`; reading
@@ -410,6 +417,14 @@ mod tests {
             frame_from: PAIRS_TOPIC.into(),
             sensors: Vec::new(),
         }
+    }
+
+    #[test]
+    fn a_merged_clouds_sensors_are_shown_on_its_topic() {
+        let names = ["lidars".to_string(), "a".into(), "a_2".into()];
+        assert_eq!(input_of(&names, "lidars_1"), Some(0));
+        assert_eq!(input_of(&names, "a_2"), Some(2));
+        assert_eq!(input_of(&names, "b_1"), None);
     }
 
     /// Every leaf of the panel tree has its config and every config a leaf.

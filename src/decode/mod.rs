@@ -92,20 +92,42 @@ impl WireEncoding {
     }
 }
 
-/// Guards against hostile or corrupt messages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Guards against hostile or corrupt messages, and which per-point field
+/// names a merged cloud's sensor.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DecodeLimits {
     /// Largest `width * height` (or foxglove point count) accepted.
     pub max_points: usize,
+    /// The field read into [`crate::model::Scan::sensor_ids`].
+    pub sensor_field: SensorField,
 }
 
 impl Default for DecodeLimits {
     fn default() -> Self {
         Self {
             max_points: 4_000_000,
+            sensor_field: SensorField::default(),
         }
     }
 }
+
+/// Which per-point field says which sensor a point of a merged cloud (a
+/// concatenated `base_link` cloud) came from (`--split-field`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorField {
+    /// The first of [`SENSOR_FIELDS`] the cloud has, of an integer type.
+    #[default]
+    Auto,
+    /// None: a merged cloud stays one sensor (`--split-field none`).
+    Off,
+    /// This field (of an integer type).
+    Named(String),
+}
+
+/// Field names that number a point's sensor (never its laser: `ring`,
+/// `laser_id` and `channel` are rings), as merging nodes write them.
+pub const SENSOR_FIELDS: [&str; 4] = ["sensor_id", "lidar_id", "sensor", "lidar_index"];
 
 /// Decodes one message payload. `is_static_tf` marks TFMessages from
 /// `/tf_static`; it is ignored for other kinds.

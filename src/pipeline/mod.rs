@@ -14,6 +14,7 @@ mod replace;
 pub mod replay;
 mod scans;
 mod sensors;
+mod split;
 mod stages;
 mod summary;
 
@@ -142,6 +143,7 @@ pub fn process(
                 });
             }
         };
+        let (sensors, split_warnings) = split::expand(&input, &config.scans, sensors);
         let write_mode = choose_write_mode(config, &input);
         let outcome = run_once(config, &input, &sensors, &write_mode, progress)?;
         // IndexedReader silently skips messages outside chunks: if the count
@@ -167,6 +169,7 @@ pub fn process(
             write_mode,
             started,
             restarted_because,
+            split_warnings,
         };
         return finish_run(config, &input, run, outcome);
     }

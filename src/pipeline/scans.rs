@@ -9,8 +9,11 @@ use std::collections::{BTreeMap, HashMap};
 use crate::decode::{self, DecodeLimits};
 use crate::input::{Catalog, InputError, InputOptions, ReadReport};
 use crate::model::{Decoded, ScanPair, format_log_time};
+use crate::pairing::split::split_by_sensor;
 use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
 use crate::topics::{Role, SelectedChannel, TopicOverrides, TopicSelection};
+
+use super::split::MergedRoute;
 
 /// How a log is read, decoded and paired: the options `process`, `eval`
 /// and `render` share, so that all three see the same scan pairs.
@@ -178,7 +181,9 @@ impl PairingStage {
             has_imu_source: topics.imu.is_some(),
             ..options.pairing.clone()
         });
-        if let Some(lidar) = &topics.lidar {
+        // A merged channel's rate is its sensors' together: each sensor's
+        // period is found from its own stamps.
+        if let (Some(lidar), None) = (&topics.lidar, &topics.merged) {
             pairer.set_nominal_period_s(catalog.nominal_period_s(lidar.channel_id));
         }
         Self {
@@ -230,6 +235,8 @@ pub(crate) struct SensorPairing {
     stages: Vec<PairingStage>,
     /// The LiDAR channel of each stage.
     lidar_channels: Vec<u16>,
+    /// The channels whose clouds merge several sensors, split among stages.
+    merged: BTreeMap<u16, MergedRoute>,
     pub(crate) bad: BadMessages,
 }
 
@@ -248,6 +255,7 @@ impl SensorPairing {
                 .iter()
                 .map(|topics| topics.lidar.as_ref().map_or(u16::MAX, |c| c.channel_id))
                 .collect(),
+            merged: MergedRoute::of(sensors),
             bad: BadMessages::default(),
         }
     }
@@ -260,6 +268,20 @@ impl SensorPairing {
         channel_id: u16,
         decoded: Decoded,
     ) -> Vec<(usize, ScanPair)> {
+        if let Decoded::Scan(scan) = &decoded
+            && let Some(route) = self.merged.get_mut(&channel_id)
+        {
+            let split = split_by_sensor(scan, &route.ids());
+            route.note(&split);
+            let mut pairs = Vec::new();
+            for (part, &(_, sensor)) in split.scans.into_iter().zip(&route.sensors) {
+                if let Some(part) = part {
+                    let stage = &mut self.stages[sensor];
+                    pairs.extend(tagged(sensor, stage.push(log_time_ns, Decoded::Scan(part))));
+                }
+            }
+            return pairs;
+        }
         if let Decoded::Scan(_) = decoded {
             let Some(sensor) = self.lidar_channels.iter().position(|&c| c == channel_id) else {
                 return Vec::new();
@@ -294,6 +316,14 @@ impl SensorPairing {
 
     pub(crate) fn stages(&self) -> &[PairingStage] {
         &self.stages
+    }
+
+    /// What the merged channels' splits left over.
+    pub(crate) fn merged_warnings(&self) -> Vec<String> {
+        self.merged
+            .values()
+            .flat_map(MergedRoute::warnings)
+            .collect()
     }
 
     /// What was decoded over all sensors: each sensor's scans, the shared

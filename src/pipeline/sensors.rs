@@ -16,7 +16,7 @@ use crate::model::{ExtrinsicSource, ScanPair};
 use crate::output::OutputWriter;
 use crate::pairing::PairingStats;
 use crate::pairing::TransformTree;
-use crate::topics::{TopicSelection, sensor_names};
+use crate::topics::{MergedSensor, TopicSelection, selection_names};
 use nalgebra::Isometry3;
 
 use super::scans::{BadMessages, DecodedCounts, SensorPairing};
@@ -36,6 +36,8 @@ pub(super) struct Annotation {
 struct SensorAnnotation {
     name: String,
     topic: String,
+    /// Its value in its topic's sensor field, for a merged cloud's sensor.
+    merged: Option<MergedSensor>,
     annotator: Annotator,
     pairs_channel: u16,
     pairs_written: u64,
@@ -61,34 +63,37 @@ pub(super) fn add_own_channels(
         .iter()
         .filter_map(|t| t.lidar.as_ref().map(|c| c.topic.as_str()))
         .collect();
-    let names = sensor_names(&topics);
+    let names = selection_names(sensors);
+    let merged: Vec<Option<MergedSensor>> = sensors.iter().map(|t| t.merged.clone()).collect();
     let register = |writer: &mut OutputWriter, specs: Vec<crate::output::OwnChannelSpec>| {
         specs
             .iter()
             .map(|spec| writer.add_own_channel(spec))
             .collect::<Result<Vec<u16>, _>>()
     };
-    let sensor = |name: &String, topic: &&str, annotator, pairs_channel| SensorAnnotation {
-        name: name.clone(),
-        topic: (*topic).to_owned(),
+    let sensor = |k: usize, annotator, pairs_channel| SensorAnnotation {
+        name: names[k].clone(),
+        topic: topics[k].to_owned(),
+        merged: merged[k].clone(),
         annotator,
         pairs_channel,
         pairs_written: 0,
         vehicle_from_sensor: None,
         frame: None,
     };
-    if names.len() == 1 {
+    // A merged cloud's sensors are named by their value even when one.
+    if names.len() == 1 && merged[0].is_none() {
         let pairs_channel = writer.add_own_channel(&pairs_channel_spec())?;
         let ids = register(writer, channel_specs())?;
         let annotator = Annotator::new(config.annotate.clone(), &ids);
         return Ok(Annotation {
-            sensors: vec![sensor(&names[0], &topics[0], annotator, pairs_channel)],
+            sensors: vec![sensor(0, annotator, pairs_channel)],
             merged_events: None,
         });
     }
     let event_ids = register(writer, event_channel_specs())?;
     let mut annotations = Vec::new();
-    for (name, topic) in names.iter().zip(&topics) {
+    for (k, name) in names.iter().enumerate() {
         let mut pairs_spec = pairs_channel_spec();
         pairs_spec.topic = sensor_topic(name, PAIRS_TOPIC);
         let pairs_channel = writer.add_own_channel(&pairs_spec)?;
@@ -98,7 +103,7 @@ pub(super) fn add_own_channels(
             &sensor_channel_ids(&ids, &event_ids),
         )
         .hold_events();
-        annotations.push(sensor(name, topic, annotator, pairs_channel));
+        annotations.push(sensor(k, annotator, pairs_channel));
     }
     Ok(Annotation {
         sensors: annotations,
@@ -128,6 +133,10 @@ pub struct SensorOutcome {
     /// Its name in our channels' topics (`/looming/<name>/points`).
     pub name: String,
     pub topic: String,
+    /// The sensor field and value that single it out of its topic's
+    /// merged clouds; absent for a topic of its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub merged: Option<MergedSensor>,
     pub pairs_written: u64,
     pub pairing: PairingStats,
     pub annotation: AnnotateStats,
@@ -145,19 +154,23 @@ pub(super) fn outcome(
     events: Vec<NearMissEvent>,
 ) -> PairingOutcome {
     let stages = stage.stages();
-    let several = stages.len() > 1;
+    let several = stages.len() > 1 || annotation.is_some_and(|a| a.merged_events.is_some());
     let mut warnings = Vec::new();
     for (k, sensor_stage) in stages.iter().enumerate() {
-        let topic = annotation
+        let label = annotation
             .and_then(|a| a.sensors.get(k))
-            .map(|s| s.topic.as_str());
+            .map(|s| match &s.merged {
+                Some(merged) => format!("{} ({} {})", s.topic, merged.field, merged.id),
+                None => s.topic.clone(),
+            });
         for warning in &sensor_stage.warnings {
-            warnings.push(match topic {
-                Some(topic) if several => format!("{topic}: {warning}"),
+            warnings.push(match &label {
+                Some(label) if several => format!("{label}: {warning}"),
                 _ => warning.clone(),
             });
         }
     }
+    warnings.extend(stage.merged_warnings());
     let mut stats = AnnotateStats::default();
     let mut sensors = Vec::new();
     for (k, sensor) in annotation
@@ -170,6 +183,7 @@ pub(super) fn outcome(
             sensors.push(SensorOutcome {
                 name: sensor.name.clone(),
                 topic: sensor.topic.clone(),
+                merged: sensor.merged.clone(),
                 pairs_written: sensor.pairs_written,
                 pairing: stages[k].stats().clone(),
                 annotation: sensor.annotator.stats().clone(),

@@ -64,6 +64,8 @@ pub(super) struct Run {
     pub(super) write_mode: WriteMode,
     pub(super) started: Instant,
     pub(super) restarted_because: Option<String>,
+    /// What finding merged clouds' sensors had to say.
+    pub(super) split_warnings: Vec<String>,
 }
 
 pub(super) fn finish_run(
@@ -77,6 +79,7 @@ pub(super) fn finish_run(
         write_mode,
         started,
         restarted_because,
+        split_warnings,
     } = run;
     let PassOutcome {
         mut writer,
@@ -106,6 +109,7 @@ pub(super) fn finish_run(
         ));
     }
     warnings.extend(report.warnings.iter().map(|w| w.message.clone()));
+    warnings.extend(split_warnings);
     warnings.extend(pairing.warnings.iter().cloned());
     let mut events = pairing.events;
     crate::events::rank(&mut events);
@@ -174,6 +178,7 @@ fn run_metadata(
         "nominal_period_s": stats.nominal_period_s,
         "output": config.output_options,
         "max_points_per_scan": config.scans.decode_limits.max_points,
+        "split_field": config.scans.decode_limits.sensor_field,
         "annotate": config.annotate,
         "replace": config.replace,
         "if_no_lidar": config.if_no_lidar,

@@ -52,6 +52,9 @@ pub struct LidarOverrides {
     /// The frame the clouds are published in (`--frame`) [default: the
     /// scenario's, the sensor's].
     pub frame: Option<CloudFrame>,
+    /// Every LiDAR's clouds on one topic, tagged per point (`--one-topic`,
+    /// [`rig::on_one_topic`]); needs several LiDARs.
+    pub one_topic: bool,
 }
 
 /// What a synth run made.
@@ -146,7 +149,24 @@ pub fn synthesize_with(
     };
     let mut writer = OutputWriter::create(&options.output, &output_options, &Default::default())?;
     let start_s = options.start_s.unwrap_or(0.0);
-    let rig = rig::rig(&scenario, options.seed);
+    let mut rig = rig::rig(&scenario, options.seed);
+    if lidar.one_topic {
+        let what = if rig.len() < 2 {
+            Some("--one-topic merges several LiDARs: give --lidars 2 or 3")
+        } else if scenario.lidar.layout != CloudLayout::RingTime {
+            Some("--one-topic concatenates clouds of one point layout: ring-time (no --layout)")
+        } else {
+            None
+        };
+        if let Some(what) = what {
+            return Err(ScenarioError::Invalid {
+                name: scenario.name.clone(),
+                what: what.into(),
+            }
+            .into());
+        }
+        rig::on_one_topic(&mut rig);
+    }
     let schedule = rig::schedule(&rig, start_s);
     let mut log = encode::SynthLog::new(&mut writer, &rig, rig::first_stamp_s(&rig, start_s))?;
     let mut sequenced = encode::SequencedWriter::new(&mut writer);
@@ -231,6 +251,7 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::mo
         skipped_invalid_points: 0,
         organized: None,
         layout: crate::model::ScanLayout::from_fields(Some("ring"), Some("time")),
+        sensor_ids: None,
     };
     let (previous, current) = (world.scan(index, seed), world.scan(index + 1, seed));
     let (from_s, to_s) = (

@@ -17,6 +17,22 @@ pub struct RigLidar {
     pub world: World,
     /// Seed of its range noise, dropouts and specks.
     pub seed: u64,
+    /// Its value in the clouds' `sensor_id` field, when every LiDAR
+    /// publishes on one topic ([`on_one_topic`]).
+    pub sensor_id: Option<u8>,
+}
+
+/// The topic every LiDAR publishes on with `--one-topic`.
+pub const ONE_TOPIC: &str = "/lidars/points";
+
+/// Every LiDAR of `rig` on [`ONE_TOPIC`], its points tagged with its index
+/// (0 the roof) in a `sensor_id` field, as a driver serving several LiDARs
+/// on one topic (or a merging node) publishes them. Truth stays per LiDAR.
+pub fn on_one_topic(rig: &mut [RigLidar]) {
+    for (k, lidar) in rig.iter_mut().enumerate() {
+        lidar.topic = ONE_TOPIC.into();
+        lidar.sensor_id = u8::try_from(k).ok();
+    }
 }
 
 /// The LiDARs of `scenario`, the roof (or only) one first; `seed` is the
@@ -31,6 +47,7 @@ pub fn rig(scenario: &Scenario, seed: u64) -> Vec<RigLidar> {
             truth_scan_topic: topics::TRUTH_SCAN.into(),
             world: roof,
             seed,
+            sensor_id: None,
         }];
     }
     let named = |name: &str, world: World, seed: u64| RigLidar {
@@ -40,6 +57,7 @@ pub fn rig(scenario: &Scenario, seed: u64) -> Vec<RigLidar> {
         truth_scan_topic: crate::truth::scan_topic(Some(name)),
         world,
         seed,
+        sensor_id: None,
     };
     let mut lidars = vec![named(ROOF_NAME, roof, seed)];
     for (k, extra) in scenario.extra_lidars.iter().enumerate() {

@@ -275,6 +275,20 @@ pub fn assert_all_input_messages_copied(input: &FileContents, output: &FileConte
     }
 }
 
+/// `looming batch LOGS -o OUT -q` through the binary: `OUT/fleet.json`
+/// (the run must succeed).
+pub fn looming_batch(logs: &Path, out: &Path) -> serde_json::Value {
+    let run = looming(&[
+        "batch",
+        logs.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    serde_json::from_slice(&std::fs::read(out.join("fleet.json")).unwrap()).unwrap()
+}
+
 /// `looming quality OUTPUT --json JSON` through the binary: the JSON report
 /// and the text printed (the run must succeed).
 pub fn looming_quality(output: &Path, json: &Path) -> (serde_json::Value, String) {

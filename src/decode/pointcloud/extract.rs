@@ -6,7 +6,7 @@ use nalgebra::Isometry3;
 use super::fields::{FieldReader, Layout, MAX_RING_VALUE, Readers, Scalar};
 use super::time::TimeToOffset;
 use crate::model::{DroppedRingField, RingSource, ScanLayout};
-use crate::model::{Scan, StampNs};
+use crate::model::{Scan, SensorIds, StampNs};
 
 /// Picks the monomorphised loop: the common all-FLOAT32 little-endian x/y/z
 /// layout gets direct f32 loads instead of per-field type dispatch.
@@ -104,6 +104,9 @@ fn extract_with<X: XyzRead>(
     let mut intensity = readers.intensity.map(|_| Vec::with_capacity(n));
     let mut ring = readers.ring.map(|_| Vec::with_capacity(n));
     let mut time_offset_s = readers.time.map(|_| Vec::with_capacity(n));
+    let mut sensor_ids = readers.sensor.as_ref().map(|_| Vec::with_capacity(n));
+    // A negative sensor value (or one above u32): no sensor field.
+    let mut bad_sensor = false;
     let time_conv = readers
         .time
         .map(|(_, conv, _)| TimeToOffset::new(conv, stamp_ns));
@@ -139,6 +142,11 @@ fn extract_with<X: XyzRead>(
                     v.push(0);
                 }
             }
+            if let (Some(v), Some((f, _))) = (&mut sensor_ids, &readers.sensor) {
+                let value = f.read(p);
+                bad_sensor |= !(0.0..=f64::from(u32::MAX)).contains(&value);
+                v.push(value as u32);
+            }
             if let (Some(v), Some((f, _, _)), Some(conv)) =
                 (&mut time_offset_s, &readers.time, &time_conv)
             {
@@ -173,5 +181,16 @@ fn extract_with<X: XyzRead>(
         skipped_invalid_points: skipped,
         organized: (layout.rows > 1).then_some((layout.rows as u32, layout.cols as u32)),
         layout: scan_layout,
+        sensor_ids: sensor_ids_of(sensor_ids.filter(|_| !bad_sensor), readers),
     }
+}
+
+/// The sensor field's values with its name (`None` without the field, or
+/// when a value was no sensor number).
+fn sensor_ids_of(ids: Option<Vec<u32>>, readers: &Readers) -> Option<SensorIds> {
+    let (_, field) = readers.sensor.as_ref()?;
+    Some(SensorIds {
+        field: field.clone(),
+        ids: ids?,
+    })
 }

@@ -4,6 +4,7 @@
 //! ring, time).
 
 use super::time::{TIME_FIELDS, TimeConvention, absolute_convention};
+use crate::decode::{SENSOR_FIELDS, SensorField};
 use crate::ros::DecodeError;
 use crate::ros::msgs::datatype;
 
@@ -156,6 +157,8 @@ pub(super) struct Readers {
     pub(super) ring: Option<(FieldReader, &'static str)>,
     /// The time field, its convention and its name.
     pub(super) time: Option<(FieldReader, TimeConvention, &'static str)>,
+    /// The per-point sensor field of a merged cloud and its name.
+    pub(super) sensor: Option<(FieldReader, String)>,
 }
 
 /// x, y and z must not share bytes: a cloud that says they do is corrupt
@@ -219,6 +222,7 @@ fn field_reader(
 pub(super) fn resolve_readers(
     fields: &[FieldDesc<'_>],
     layout: &Layout<'_>,
+    sensor_field: &SensorField,
 ) -> Result<Readers, DecodeError> {
     let (ps, be) = (layout.point_step, layout.big_endian);
     let optional = |names: &[&str]| -> Result<Option<FieldReader>, DecodeError> {
@@ -267,5 +271,26 @@ pub(super) fn resolve_readers(
         intensity: optional(&["intensity", "reflectivity"])?,
         ring,
         time,
+        sensor: sensor_reader(fields, ps, be, sensor_field)?,
     })
+}
+
+/// The sensor field `choice` names, when the cloud has it with an integer
+/// type (a float sensor number is no sensor field: it is left unread).
+fn sensor_reader(
+    fields: &[FieldDesc<'_>],
+    point_step: usize,
+    big_endian: bool,
+    choice: &SensorField,
+) -> Result<Option<(FieldReader, String)>, DecodeError> {
+    let integer = |d: &&FieldDesc<'_>| d.scalar.is_ok_and(|s| !s.is_float());
+    let desc = match choice {
+        SensorField::Off => None,
+        SensorField::Auto => SENSOR_FIELDS
+            .iter()
+            .find_map(|n| find(fields, n).filter(integer)),
+        SensorField::Named(name) => find(fields, name).filter(integer),
+    };
+    desc.map(|d| field_reader(d, point_step, big_endian).map(|r| (r, d.name.to_owned())))
+        .transpose()
 }

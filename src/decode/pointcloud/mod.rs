@@ -48,6 +48,7 @@ fn empty_scan(stamp_ns: StampNs, frame_id: String, sensor_pose: Isometry3<f64>) 
         skipped_invalid_points: 0,
         organized: None,
         layout: ScanLayout::default(),
+        sensor_ids: None,
     }
 }
 
@@ -113,7 +114,7 @@ pub fn scan_from_pointcloud2(
             scalar: Scalar::from_ros(f.datatype).ok_or(i64::from(f.datatype)),
         })
         .collect();
-    let readers = resolve_readers(&fields, &layout)?;
+    let readers = resolve_readers(&fields, &layout, &limits.sensor_field)?;
     Ok(extract(
         &layout,
         &readers,
@@ -202,6 +203,6 @@ pub fn scan_from_foxglove(
             scalar: Scalar::from_foxglove(f.r#type).ok_or(i64::from(f.r#type)),
         })
         .collect();
-    let readers = resolve_readers(&fields, &layout)?;
+    let readers = resolve_readers(&fields, &layout, &limits.sensor_field)?;
     Ok(extract(&layout, &readers, stamp_ns, frame_id, sensor_pose))
 }

@@ -134,6 +134,74 @@ pub(super) fn into_frame(
     cloud.header.frame_id = frame.to_owned();
 }
 
+/// Every point of `cloud` tagged with its LiDAR in a `sensor_id` (UINT8)
+/// field after the others (`--one-topic`), the point step kept a multiple
+/// of 4 bytes as drivers pad it.
+pub(super) fn tag_sensor(cloud: &mut PointCloud2<'static>, sensor_id: u8) {
+    let old_step = cloud.point_step as usize;
+    let new_step = (old_step + 1).next_multiple_of(4);
+    let points = cloud.data.len() / old_step.max(1);
+    let mut data = vec![0u8; points * new_step];
+    for (old, new) in cloud
+        .data
+        .chunks_exact(old_step.max(1))
+        .zip(data.chunks_exact_mut(new_step))
+    {
+        new[..old_step].copy_from_slice(old);
+        new[old_step] = sensor_id;
+    }
+    cloud.fields.push(PointField {
+        name: "sensor_id".into(),
+        offset: old_step as u32,
+        datatype: datatype::UINT8,
+        count: 1,
+    });
+    cloud.point_step = new_step as u32;
+    cloud.row_step = cloud.width * cloud.point_step;
+    cloud.data = data.into();
+}
+
+/// `base` with the points of `others` after its own, as a concatenating
+/// node merges clouds: one row, `base`'s stamp, each point's `time` (FLOAT32
+/// seconds from the stamp) shifted to stay its own time. Clouds of another
+/// point layout than `base`'s are left out (`--one-topic` keeps every
+/// LiDAR in the ring-time layout).
+pub(super) fn concatenate(
+    mut base: PointCloud2<'static>,
+    others: &[PointCloud2<'static>],
+) -> PointCloud2<'static> {
+    let time = base
+        .fields
+        .iter()
+        .find(|f| f.name == "time" && f.datatype == datatype::FLOAT32)
+        .map(|f| f.offset as usize);
+    let step = base.point_step as usize;
+    let mut data = base.data.to_vec();
+    let mut points = base.width * base.height;
+    for other in others
+        .iter()
+        .filter(|o| o.fields == base.fields && o.point_step == base.point_step)
+    {
+        let shift_s = (other.header.stamp.to_ns() - base.header.stamp.to_ns()) as f64 * 1e-9;
+        let start = data.len();
+        data.extend_from_slice(&other.data);
+        if let Some(at) = time {
+            for point in data[start..].chunks_exact_mut(step) {
+                let t =
+                    f32::from_le_bytes([point[at], point[at + 1], point[at + 2], point[at + 3]]);
+                put_f32(point, at, (f64::from(t) + shift_s) as f32);
+            }
+        }
+        points += other.width * other.height;
+        base.is_dense &= other.is_dense;
+    }
+    base.height = 1;
+    base.width = points;
+    base.row_step = points * base.point_step;
+    base.data = data.into();
+    base
+}
+
 /// Byte offsets of a `/lidar/points` point's fields (`None`: the layout has
 /// no such field).
 struct LidarFields {

@@ -84,10 +84,7 @@ impl Channels {
                 ros_schemas::point_cloud2(d),
             )
         };
-        let clouds: Vec<u16> = rig
-            .iter()
-            .map(|lidar| add(cloud(&lidar.topic)))
-            .collect::<Result<_, _>>()?;
+        let clouds = per_topic(rig, |topic| add(cloud(topic)))?;
         let imu = add(OwnChannelSpec::ros2(
             topics::IMU,
             "sensor_msgs",
@@ -153,6 +150,25 @@ impl Channels {
     }
 }
 
+/// A channel per distinct topic of `rig`'s LiDARs (those sharing one,
+/// `--one-topic`, share its channel), each LiDAR's in rig order.
+fn per_topic(
+    rig: &[RigLidar],
+    mut add: impl FnMut(&str) -> Result<u16, OutputError>,
+) -> Result<Vec<u16>, OutputError> {
+    let mut by_topic = std::collections::BTreeMap::new();
+    let mut clouds = Vec::with_capacity(rig.len());
+    for lidar in rig {
+        let id = match by_topic.get(&lidar.topic) {
+            Some(&id) => id,
+            None => add(&lidar.topic)?,
+        };
+        by_topic.insert(lidar.topic.clone(), id);
+        clouds.push(id);
+    }
+    Ok(clouds)
+}
+
 /// One encoded message for the writer.
 #[derive(Debug, Clone)]
 pub(crate) struct Encoded {
@@ -170,6 +186,9 @@ pub(crate) struct SynthLog {
     imu_index: u64,
     velocity_index: u64,
     pending: Vec<Encoded>,
+    /// With every LiDAR on one topic: each LiDAR's latest cloud not yet
+    /// merged (the roof's slot unused).
+    latest: Vec<Option<crate::ros::msgs::PointCloud2<'static>>>,
 }
 
 impl SynthLog {
@@ -190,6 +209,7 @@ impl SynthLog {
             imu_index: first_index(world.scenario.imu.rate_hz),
             velocity_index: first_index(world.scenario.velocity_rate_hz),
             pending: Vec::new(),
+            latest: vec![None; rig.len()],
         };
         let tf = tf_static(rig, start_s);
         log.push(
@@ -244,7 +264,9 @@ impl SynthLog {
                 lidar_cloud::into_frame(&mut points, &world_from_lidar, ODOM_FRAME);
             }
         }
-        self.push(cloud, log_time_ns, points.encode_cdr(false));
+        if let Some(merged) = self.merge(k, lidar, points) {
+            self.push(cloud, log_time_ns, merged.encode_cdr(false));
+        }
         self.push(
             truth_points,
             log_time_ns,
@@ -253,6 +275,29 @@ impl SynthLog {
         let truth =
             serde_json::to_vec(&TruthScan::of_lidar(world, scan, frame)).expect("truth serialises");
         self.push(truth_scan, log_time_ns, truth);
+    }
+
+    /// The cloud to publish now: `points` itself; with every LiDAR on one
+    /// topic (`rig::on_one_topic`), what a concatenating node (Autoware's)
+    /// publishes at the roof LiDAR's rate: the roof's scan with the latest
+    /// scan of every other LiDAR, each point tagged with its LiDAR, and
+    /// nothing when another LiDAR's scan ends (it waits for the roof's).
+    fn merge(
+        &mut self,
+        k: usize,
+        lidar: &RigLidar,
+        mut points: crate::ros::msgs::PointCloud2<'static>,
+    ) -> Option<crate::ros::msgs::PointCloud2<'static>> {
+        let Some(sensor_id) = lidar.sensor_id else {
+            return Some(points);
+        };
+        lidar_cloud::tag_sensor(&mut points, sensor_id);
+        if k != 0 {
+            self.latest[k] = Some(points);
+            return None;
+        }
+        let others: Vec<_> = self.latest.iter_mut().filter_map(Option::take).collect();
+        Some(lidar_cloud::concatenate(points, &others))
     }
 
     /// IMU, twist and odometry messages with stamps in [motion_until_s, until_s).

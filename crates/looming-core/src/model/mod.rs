@@ -18,5 +18,5 @@ pub use motion::{
 pub use origin::{OriginSource, SensorOrigin};
 pub use pair::ScanPair;
 pub use samples::{Decoded, FrameTransform, ImuSample, VelocitySample, VelocitySourceKind};
-pub use scan::{Scan, StampNs};
+pub use scan::{Scan, SensorIds, StampNs};
 pub use time::format_log_time;

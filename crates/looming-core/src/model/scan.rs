@@ -50,6 +50,19 @@ pub struct Scan {
     /// Where `ring` and `time_offset_s` come from. The decoder names the
     /// fields it read; [`crate::engine::layout::complete`] fills the rest.
     pub layout: ScanLayout,
+    /// The sensor of each kept point, in a cloud that merges several
+    /// sensors and says which point is whose (a `sensor_id` field);
+    /// `None` for a cloud of one sensor.
+    pub sensor_ids: Option<SensorIds>,
+}
+
+/// The per-point sensor field of a merged cloud: its name and each kept
+/// point's value (`pairing::split` makes a scan per value).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SensorIds {
+    /// The field's name in the cloud (`sensor_id`, `lidar_id`, ...).
+    pub field: String,
+    pub ids: Vec<u32>,
 }
 
 impl Scan {

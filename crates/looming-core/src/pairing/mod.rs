@@ -22,6 +22,7 @@ pub mod frames;
 mod history;
 pub mod motion;
 pub mod origin;
+pub mod split;
 mod stats;
 
 use buffer::{InsertOutcome, SampleBuffer};

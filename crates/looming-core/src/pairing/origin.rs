@@ -129,7 +129,7 @@ pub fn locate(
     let mut warnings: Vec<String> = warning.into_iter().collect();
     if origin.several_origins {
         warnings.push(format!(
-            "{}: the returns' rays do not meet at one point (ring spread {:.2} deg about the best origin): the cloud merges several sensors, or its sensor is tilted in frame `{}`; its looming is unreliable",
+            "{}: the returns' rays do not meet at one point (ring spread {:.2} deg about the best origin): the cloud merges several sensors, or its sensor is tilted in frame `{}`; its looming is unreliable (a merged cloud whose points carry their sensor in a field is split by it: sensor_id, lidar_id, ...)",
             scan.frame_id,
             origin.ring_spread_deg.unwrap_or(f64::NAN),
             scan.frame_id
@@ -621,6 +621,7 @@ mod tests {
             skipped_invalid_points: 0,
             organized: None,
             layout: ScanLayout::from_fields(Some("ring"), None),
+            sensor_ids: None,
         }
     }
 

@@ -25,6 +25,7 @@ fn scan_with(
         skipped_invalid_points: 0,
         organized: None,
         layout: crate::model::ScanLayout::default(),
+        sensor_ids: None,
     })
 }
 

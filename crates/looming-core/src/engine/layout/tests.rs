@@ -79,6 +79,7 @@ fn scan_of(points: Vec<[f32; 3]>, source_index: Vec<u32>) -> Scan {
         skipped_invalid_points: 0,
         organized: None,
         layout: ScanLayout::default(),
+        sensor_ids: None,
     }
 }
 
