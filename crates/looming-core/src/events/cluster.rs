@@ -375,14 +375,17 @@ fn object_offset_m(
     (corridor, horizon_s): (&Corridor, f64),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> f64 {
-    let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&cell| position(cell)).collect();
-    let offset_after = |shift: Vector3<f64>| {
-        points
-            .iter()
-            .map(|p| corridor.offset_m(&(p + shift)))
-            .fold(f64::INFINITY, f64::min)
-    };
-    let now = offset_after(Vector3::zeros());
+    // The returns by their distance from the path now, nearest first: the
+    // distance from the path moves by at most the shift (it is a distance
+    // to a curve), so a shifted return need only be looked at while its
+    // distance now, less the shift, could beat the nearest found.
+    let mut returns: Vec<(f64, Vector3<f64>)> = cells
+        .iter()
+        .filter_map(|&cell| position(cell))
+        .map(|p| (corridor.offset_m(&p), p))
+        .collect();
+    returns.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let now = returns.first().map_or(f64::INFINITY, |r| r.0);
     let velocity = objects.objects[index]
         .velocity_mps
         .map(Vector3::from)
@@ -392,9 +395,18 @@ fn object_offset_m(
         return now;
     };
     let steps = (horizon_s / PREDICTION_STEP_S).ceil() as usize;
-    (1..=steps)
-        .map(|k| offset_after(velocity * (k as f64 * PREDICTION_STEP_S).min(horizon_s)))
-        .fold(now, f64::min)
+    let mut nearest = now;
+    for k in 1..=steps {
+        let shift = velocity * (k as f64 * PREDICTION_STEP_S).min(horizon_s);
+        let shift_m = shift.norm();
+        for (offset_now, p) in &returns {
+            if offset_now - shift_m >= nearest {
+                break;
+            }
+            nearest = nearest.min(corridor.offset_m(&(p + shift)));
+        }
+    }
+    nearest
 }
 
 /// The farthest ahead an object's own motion is followed into the path, s.

@@ -23,11 +23,13 @@ pub enum PathSource {
 }
 
 /// The ego path in the LiDAR frame (horizontal plane) and the band around it:
-/// the arc through the sensor tangent to `heading_rad` with constant
+/// the arc through the sensor tangent to its heading with constant
 /// `curvature_per_m` (left positive), `REACH_M` long either way.
 #[derive(Debug, Clone)]
 pub struct Corridor {
-    heading_rad: f64,
+    /// The heading's sine and cosine, taken once (`offset_m` runs for
+    /// every cell of every hot cluster).
+    heading_sin_cos: (f64, f64),
     curvature_per_m: f64,
     half_width_m: f64,
     pub source: PathSource,
@@ -50,7 +52,7 @@ impl Corridor {
             _ => (0.0, 0.0, PathSource::LidarXAxis),
         };
         Self {
-            heading_rad,
+            heading_sin_cos: heading_rad.sin_cos(),
             curvature_per_m,
             half_width_m,
             source,
@@ -62,7 +64,7 @@ impl Corridor {
     /// arc; else from the nearer end.
     pub fn offset_m(&self, p: &Vector3<f64>) -> f64 {
         // Path-aligned coordinates: `along` the heading, `left` of it.
-        let (sin, cos) = self.heading_rad.sin_cos();
+        let (sin, cos) = self.heading_sin_cos;
         let along = p.x * cos + p.y * sin;
         let left = -p.x * sin + p.y * cos;
         let k = self.curvature_per_m;
