@@ -14,6 +14,12 @@ use crate::engine::PairLooming;
 const MAX_MISSED_PAIRS: u32 = 2;
 /// Pairs a track has been followed in before its velocity is reported.
 const MIN_PAIRS_FOR_VELOCITY: u32 = 3;
+/// An object whose horizontal extent grew or shrank by more than this
+/// factor since its last pair is another segment under the same id (merged
+/// with a neighbour, or split): the move of its centroid is no velocity.
+/// On the KITTI scans republished in `base_link` a 9-cell segment merged
+/// into a 6551-cell facade read 12 m/s across the path.
+const SIZE_JUMP: f64 = 2.0;
 /// Smallest gate between a predicted and a current centroid, m.
 const MIN_GATE_M: f64 = 1.0;
 /// ... plus this share of the larger object's horizontal extent.
@@ -28,6 +34,9 @@ struct Track {
     extent_m: f64,
     /// Its own velocity in the LiDAR frame (ego motion removed), m/s.
     velocity_mps: [f64; 3],
+    /// Pairs its velocity has been followed over: its age, but restarted
+    /// where its object's size jumped (see [`SIZE_JUMP`]).
+    velocity_pairs: u32,
     /// Its object's nearest range in its last pair, m.
     nearest_range_m: f64,
 }
@@ -84,7 +93,7 @@ impl ObjectTracker {
             object.age_pairs = track.age_pairs;
             // Two displacements smoothed before a velocity is told.
             object.velocity_mps =
-                (track.age_pairs >= MIN_PAIRS_FOR_VELOCITY).then_some(track.velocity_mps);
+                (track.velocity_pairs >= MIN_PAIRS_FOR_VELOCITY).then_some(track.velocity_mps);
             next_tracks.push(track);
         }
         for (t, track) in self.tracks.iter().enumerate() {
@@ -107,6 +116,7 @@ impl ObjectTracker {
             centroid_m: object.centroid_m,
             extent_m: extent(object),
             velocity_mps: [0.0; 3],
+            velocity_pairs: 1,
             nearest_range_m: object.nearest_range_m,
         }
     }
@@ -124,8 +134,13 @@ impl ObjectTracker {
         // track kept through missed pairs was moved along each of them),
         // against where the object is: its own displacement, smoothed.
         let still = static_prediction(&track.centroid_m, ego_v, ego_w, dt_s);
-        let mut velocity_mps = track.velocity_mps;
-        if dt_s > 0.0 {
+        let (mut velocity_mps, mut velocity_pairs) = (track.velocity_mps, track.velocity_pairs + 1);
+        // A segment that merged with a neighbour or lost most of itself
+        // moves its centroid without moving: its velocity starts again.
+        let size_ratio = extent(object).max(0.1) / track.extent_m.max(0.1);
+        if !(1.0 / SIZE_JUMP..=SIZE_JUMP).contains(&size_ratio) {
+            (velocity_mps, velocity_pairs) = ([0.0; 3], 1);
+        } else if dt_s > 0.0 {
             for k in 0..3 {
                 let measured = (object.centroid_m[k] - still[k]) / dt_s;
                 velocity_mps[k] = 0.5 * velocity_mps[k] + 0.5 * measured;
@@ -138,6 +153,7 @@ impl ObjectTracker {
             centroid_m: object.centroid_m,
             extent_m: extent(object),
             velocity_mps,
+            velocity_pairs,
             nearest_range_m: object.nearest_range_m,
         }
     }
@@ -253,5 +269,32 @@ mod tests {
         let mut first = object(9.5, None);
         looming_from_range(&mut first, 10.0, 0.0);
         assert_eq!(first.looming_per_s, None);
+    }
+
+    #[test]
+    fn a_segment_whose_size_jumps_starts_its_velocity_again() {
+        // A 1 m object walking 1 m/s across the LiDAR's y axis (no ego
+        // motion), then merged with a 9 m neighbour: the merged centroid's
+        // 4 m jump is no velocity.
+        let mut tracker = ObjectTracker::default();
+        let at = |y: f64, width_m: f64| {
+            let mut o = object(10.0, Some(0.0));
+            o.centroid_m = [10.0, y, 0.0];
+            o.min_m = [9.5, y - 0.5 * width_m, -1.0];
+            o.max_m = [10.5, y + 0.5 * width_m, 0.5];
+            o
+        };
+        let mut track = tracker.started(&at(0.0, 1.0));
+        tracker.tracks.push(track.clone());
+        for k in 1..=3 {
+            track = tracker.continued(0, &at(0.1 * f64::from(k), 1.0), [0.0; 3], [0.0; 3], 0.1);
+            tracker.tracks[0] = track.clone();
+        }
+        assert!(track.velocity_pairs >= MIN_PAIRS_FOR_VELOCITY);
+        assert!(track.velocity_mps[1] > 0.5, "{:?}", track.velocity_mps);
+        let merged = tracker.continued(0, &at(4.4, 9.0), [0.0; 3], [0.0; 3], 0.1);
+        assert_eq!(merged.velocity_pairs, 1);
+        assert_eq!(merged.velocity_mps, [0.0; 3]);
+        assert_eq!(merged.age_pairs, track.age_pairs + 1, "the id and age go on");
     }
 }
