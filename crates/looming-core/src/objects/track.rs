@@ -295,6 +295,10 @@ mod tests {
         let merged = tracker.continued(0, &at(4.4, 9.0), [0.0; 3], [0.0; 3], 0.1);
         assert_eq!(merged.velocity_pairs, 1);
         assert_eq!(merged.velocity_mps, [0.0; 3]);
-        assert_eq!(merged.age_pairs, track.age_pairs + 1, "the id and age go on");
+        assert_eq!(
+            merged.age_pairs,
+            track.age_pairs + 1,
+            "the id and age go on"
+        );
     }
 }

@@ -42,6 +42,10 @@ pub struct SensorPlacement {
     origin: Option<SensorOrigin>,
     /// `/tf`'s recent transforms.
     history: TransformHistory,
+    /// Scans placed since the origin was found.
+    scans_placed: u32,
+    /// The origin found from the rings was seen to move (said once).
+    seen_moving: bool,
 }
 
 impl SensorPlacement {
@@ -77,11 +81,53 @@ impl SensorPlacement {
             }
             _ => found.clone(),
         };
+        self.scans_placed += 1;
+        if found_now.is_none() && self.scans_placed.is_multiple_of(MOVE_CHECK_EVERY_SCANS) {
+            warnings.extend(self.check_still(scan, &found, period_s));
+        }
         apply(scan, &found);
         record(scan, &found);
         (warnings, found_now)
     }
+
+    /// An origin found from the rings of the first scan holds for the next
+    /// ones only if the cloud's frame moves with the sensor (its own or a
+    /// vehicle frame). A world frame with no `/tf` to give the sensor's pose
+    /// leaves the sensor driving through the cloud's frame: its rings spread
+    /// about the first scan's origin, and every range image after is built
+    /// about the wrong point. Said once (the run then carries on; what it
+    /// gives is not to be trusted).
+    fn check_still(&mut self, scan: &Scan, found: &SensorOrigin, period_s: f64) -> Option<String> {
+        let first_spread_deg = found.ring_spread_deg?;
+        if self.seen_moving
+            || !matches!(
+                found.source,
+                OriginSource::Geometry | OriginSource::CloudFrame
+            )
+        {
+            return None;
+        }
+        let sample = ringed_sample(scan, period_s)?;
+        let spread_deg = ring_spread_deg(&sample, &found.cloud_from_sensor)?;
+        if spread_deg <= MERGED_SPREAD_DEG.max(MOVED_SPREAD_FACTOR * first_spread_deg) {
+            return None;
+        }
+        self.seen_moving = true;
+        Some(format!(
+            "the sensor moves through its clouds' frame `{}`: {} scans after its origin was \
+             found from the rings (spread {first_spread_deg:.3} deg), they spread {spread_deg:.3} \
+             deg about it. A world frame needs /tf to the LiDAR's frame (or --sensor-frame); \
+             without it this log's looming is not to be trusted",
+            scan.frame_id, self.scans_placed
+        ))
+    }
 }
+
+/// How often a sensor placed by its rings is checked for moving, scans.
+const MOVE_CHECK_EVERY_SCANS: u32 = 10;
+/// Its rings spread this many times more about the first origin (and more
+/// than [`MERGED_SPREAD_DEG`]): it moved.
+const MOVED_SPREAD_FACTOR: f64 = 5.0;
 
 /// Frame names that say LiDAR.
 const LIDAR_NAMES: [&str; 14] = [
@@ -645,6 +691,33 @@ mod tests {
         let p = moved.points_m[0];
         assert!((f64::from(p[2]) + 1.8).abs() < 0.05, "{p:?}");
         assert!((moved.sensor_pose.translation.vector.x - 0.9).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_sensor_driving_through_a_world_frame_without_tf_is_said() {
+        let tree = TransformTree::new();
+        let mut placement = SensorPlacement::default();
+        let mut warned = Vec::new();
+        // The sensor 1 m further along x at every scan, no /tf.
+        for k in 0..MOVE_CHECK_EVERY_SCANS {
+            let mut scan = scan_in_base_link(&[[0.9 + f64::from(k), -0.3, 1.8]]);
+            scan.frame_id = "map".into();
+            let (warnings, _) = placement.place(&mut scan, &tree, None, 0.1);
+            warned.extend(warnings);
+        }
+        assert!(
+            warned
+                .iter()
+                .any(|w| w.contains("moves through its clouds' frame `map`")),
+            "{warned:?}"
+        );
+        // A sensor that stays where it was found (a vehicle frame) is not.
+        let mut still = SensorPlacement::default();
+        for _ in 0..MOVE_CHECK_EVERY_SCANS {
+            let mut scan = scan_in_base_link(&[[0.9, -0.3, 1.8]]);
+            let (warnings, _) = still.place(&mut scan, &tree, None, 0.1);
+            assert!(warnings.is_empty(), "{warnings:?}");
+        }
     }
 
     #[test]
