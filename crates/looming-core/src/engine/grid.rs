@@ -200,8 +200,15 @@ pub(super) fn wrap_col(col: i64, cols: i64) -> usize {
 
 /// Azimuth and elevation of a point.
 pub fn angles(p: &[f32; 3]) -> (f64, f64) {
+    (azimuth(p), elevation(p))
+}
+
+/// Elevation of a point (the second of [`angles`]), alone: where only it is
+/// wanted, the azimuth's `atan2` would still be paid (a library call the
+/// compiler keeps), once per return per pair.
+pub fn elevation(p: &[f32; 3]) -> f64 {
     let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-    (azimuth(p), z.atan2(x.hypot(y)))
+    z.atan2(x.hypot(y))
 }
 
 /// Azimuth of a point (the first of [`angles`]).
@@ -286,7 +293,7 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
     let row = match (&scan.ring, &geometry.ring_to_row) {
         (Some(rings), Some(ring_to_row)) => *ring_to_row.get(usize::from(rings[index]))?,
         // The elevation only where no ring gives the row.
-        _ => geometry.beams.row_of(angles(p).1),
+        _ => geometry.beams.row_of(elevation(p)),
     };
     (row < geometry.rows).then(|| row * geometry.cols + geometry.col_of(azimuth))
 }
@@ -328,7 +335,7 @@ pub(crate) fn geometry_for(
     let elevations: Vec<f32> = current
         .points_m
         .par_iter()
-        .map(|p| angles(p).1 as f32)
+        .map(|p| elevation(p) as f32)
         .collect();
     let beams = BeamTable::infer(&elevations, 256)?;
     let rows = beams.len();
@@ -389,7 +396,7 @@ fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>, O
         .par_iter()
         .map(|p| {
             let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            (1.0 / range, angles(p).1 as f32)
+            (1.0 / range, elevation(p) as f32)
         })
         .collect();
     for (value, &ring) in values.into_iter().zip(rings) {
