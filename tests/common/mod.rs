@@ -166,14 +166,42 @@ fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Vec<u8>
     out
 }
 
-/// A scratch directory for one test.
+/// A scratch directory for one test. It is left after the test (to look at
+/// after a failure) until the same test runs again from another process,
+/// which removes it: a run of the suite leaves about a gigabyte (the split
+/// sensors' logs alone 279 MB), and runs must not pile up on a machine.
 pub fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir()
-        .join("looming-tests")
-        .join(format!("{name}-{}", std::process::id()));
+    let root = std::env::temp_dir().join("looming-tests");
+    remove_finished_runs(&root, name);
+    let dir = root.join(format!("{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// Removes `root/NAME-PID` of processes that have ended (Linux's `/proc`
+/// tells; elsewhere nothing is removed, as a running one could be).
+fn remove_finished_runs(root: &Path, name: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(root) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let pid = file_name
+            .to_str()
+            .and_then(|f| f.strip_prefix(name))
+            .and_then(|rest| rest.strip_prefix('-'))
+            .and_then(|pid| pid.parse::<u32>().ok());
+        if let Some(pid) = pid
+            && pid != std::process::id()
+            && !Path::new(&format!("/proc/{pid}")).exists()
+        {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 pub fn write(path: &Path, bytes: &[u8]) {
