@@ -168,7 +168,7 @@ fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Vec<u8>
 
 /// A scratch directory for one test. It is left after the test (to look at
 /// after a failure) until the same test runs again from another process,
-/// which removes it: a run of the suite leaves about a gigabyte (the split
+/// which removes it: a run of the suite leaves about 2 GB (the split
 /// sensors' logs alone 279 MB), and runs must not pile up on a machine.
 pub fn scratch(name: &str) -> PathBuf {
     let root = std::env::temp_dir().join("looming-tests");
