@@ -159,10 +159,7 @@ pub fn decode_points(payload: &[u8]) -> Result<(StampNs, Vec<PointTruth>), Strin
     let cloud = PointCloud2::decode_cdr(payload).map_err(|e| e.to_string())?;
     let field = |name: &str| {
         cloud
-            .fields
-            .iter()
-            .find(|f| f.name == name)
-            .map(|f| f.offset as usize)
+            .field_offset(name)
             .ok_or_else(|| format!("/truth/points has no `{name}` field"))
     };
     let (pl, rl, om, ic, sf, mv) = (

@@ -277,7 +277,6 @@ pub struct Annotator {
     detector: EventDetector,
     events: Vec<NearMissEvent>,
     stats: AnnotateStats,
-    quality: Option<PairQuality>,
     tracker: ObjectTracker,
     /// The pair the engine finished last, waiting for
     /// [`Annotator::complete`] beside the engine's next pair.
@@ -301,7 +300,6 @@ impl Annotator {
             cache: EngineCache::default(),
             events: Vec::new(),
             stats: AnnotateStats::default(),
-            quality: None,
             tracker: ObjectTracker::default(),
             pending: None,
             hold_events: false,
@@ -329,7 +327,6 @@ impl Annotator {
     /// before it). `looming`: the engine's result, `None` when it made no
     /// image of the pair.
     fn complete(&mut self, pair: &ScanPair, looming: Option<PairLooming>) -> Annotated {
-        self.quality = None;
         let Some(mut looming) = looming else {
             self.stats.pairs_without_image += 1;
             return Annotated::default();
@@ -348,14 +345,9 @@ impl Annotator {
         let started = Instant::now();
         self.stats.cells_fused_with_object += fusion.combined as u64;
         self.stats.cells_filled_from_object += fusion.filled as u64;
-        self.quality = Some(PairQuality::measure_on_ground(
-            &looming,
-            &pair.current,
-            objects.ground.as_ref(),
-        ));
-        if let Some(quality) = &mut self.quality {
-            quality.count_objects(&objects);
-        }
+        let mut quality =
+            PairQuality::measure_on_ground(&looming, &pair.current, objects.ground.as_ref());
+        quality.count_objects(&objects);
         self.stats.pairs_annotated += 1;
         if !looming.availability.ego_velocity {
             self.stats.pairs_lidar_only += 1;
@@ -370,9 +362,7 @@ impl Annotator {
             objects: Some(&objects),
         });
         self.stats.event_min_cells = self.detector.min_cells_used();
-        if let Some(quality) = &mut self.quality {
-            quality.path_peak_looming_per_s = self.detector.path_peak_looming_per_s();
-        }
+        quality.path_peak_looming_per_s = self.detector.path_peak_looming_per_s();
         for event in ended {
             self.push_event(event, &mut out);
         }
@@ -382,7 +372,7 @@ impl Annotator {
         self.stats.stages.messages_s += started.elapsed().as_secs_f64();
         Annotated {
             messages: out,
-            quality: self.quality.take(),
+            quality: Some(quality),
         }
     }
 

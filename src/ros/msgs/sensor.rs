@@ -122,6 +122,14 @@ impl<'a> RosMessage<'a> for PointCloud2<'a> {
 wire_entry_points!(PointCloud2<'a>);
 
 impl PointCloud2<'_> {
+    /// Byte offset within a point of the field named `name`.
+    pub fn field_offset(&self, name: &str) -> Option<usize> {
+        self.fields
+            .iter()
+            .find(|f| f.name == name)
+            .map(|f| f.offset as usize)
+    }
+
     /// Detaches the cloud from the payload it was decoded from.
     pub fn into_owned(self) -> PointCloud2<'static> {
         PointCloud2 {

@@ -107,13 +107,7 @@ pub(super) fn into_frame(
     frame_from_lidar: &nalgebra::Isometry3<f64>,
     frame: &str,
 ) {
-    let offset = |name: &str| {
-        cloud
-            .fields
-            .iter()
-            .find(|f| f.name == name)
-            .map(|f| f.offset as usize)
-    };
+    let offset = |name: &str| cloud.field_offset(name);
     let (Some(x), Some(y), Some(z)) = (offset("x"), offset("y"), offset("z")) else {
         return;
     };

@@ -141,35 +141,33 @@ fn solve(
     if equations.len() < MIN_EQUATIONS {
         return None;
     }
-    let moved: Vec<Equation> = equations
+    // Each misfit moved by what was applied (the equations themselves are
+    // the render's, shared by every step on it).
+    let misfits: Vec<f64> = equations
         .iter()
-        .map(|eq| Equation {
-            misfit_m: eq.misfit_m - eq.jacobian.dot(applied),
-            ..*eq
-        })
+        .map(|eq| eq.misfit_m - eq.jacobian.dot(applied))
         .collect();
-    let equations = moved.as_slice();
-    let mut misfits: Vec<f64> = equations.iter().map(|e| e.misfit_m.abs()).collect();
-    let median = median_in_place(&mut misfits);
+    let mut magnitudes: Vec<f64> = misfits.iter().map(|m| m.abs()).collect();
+    let median = median_in_place(&mut magnitudes);
     // The scale of a static surface's misfit: no smaller than the noise.
     let scale = (1.4826 * median).max(2.0 * range_noise_m);
     // Cauchy weights: movers and unmasked edges count for little.
-    let weights: Vec<f64> = equations
+    let weights: Vec<f64> = misfits
         .iter()
-        .map(|eq| {
-            let u = eq.misfit_m / (CAUCHY_K * scale);
+        .map(|misfit_m| {
+            let u = misfit_m / (CAUCHY_K * scale);
             1.0 / (1.0 + u * u)
         })
         .collect();
     let mut normal = Matrix6::<f64>::zeros();
     let mut rhs = Vector6::<f64>::zeros();
     let mut inliers = 0;
-    for (eq, &w) in equations.iter().zip(&weights) {
+    for ((eq, &w), misfit_m) in equations.iter().zip(&weights).zip(&misfits) {
         if w > 0.5 {
             inliers += 1;
         }
         normal += eq.jacobian * eq.jacobian.transpose() * w;
-        rhs += eq.jacobian * (eq.misfit_m * w);
+        rhs += eq.jacobian * (misfit_m * w);
     }
     // Damping: the motion along directions no surface constrains (a
     // corridor of road and side walls says nothing of forward motion) stays
@@ -189,7 +187,12 @@ fn solve(
     if !solution.iter().all(|x| x.is_finite()) {
         return None;
     }
-    let covariance = clustered_covariance(equations, &weights, &solution, &cholesky.inverse());
+    let covariance = clustered_covariance(
+        (equations, &misfits),
+        &weights,
+        &solution,
+        &cholesky.inverse(),
+    );
     Some(Correction {
         angular_radps: Vector3::new(solution[0], solution[1], solution[2]),
         velocity_mps: Vector3::new(solution[3], solution[4], solution[5]),
@@ -204,7 +207,7 @@ fn solve(
 /// with `s_b` the block's summed `w r J` (`r` the misfit left by the
 /// solution) and `G` the sectors.
 fn clustered_covariance(
-    equations: &[Equation],
+    (equations, misfits): (&[Equation], &[f64]),
     weights: &[f64],
     solution: &Vector6<f64>,
     normal_inverse: &Matrix6<f64>,
@@ -212,8 +215,8 @@ fn clustered_covariance(
     // Per sector, in sector order (so the sums, and the output, are the same
     // from run to run).
     let mut scores: Vec<Option<Vector6<f64>>> = vec![None; AZIMUTH_SECTORS];
-    for (eq, &w) in equations.iter().zip(weights) {
-        let left_m = eq.misfit_m - eq.jacobian.dot(solution);
+    for ((eq, &w), misfit_m) in equations.iter().zip(weights).zip(misfits) {
+        let left_m = misfit_m - eq.jacobian.dot(solution);
         let score = scores[eq.block as usize].get_or_insert_with(Vector6::zeros);
         *score += eq.jacobian * (w * left_m);
     }

@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 
 use crate::engine::{ImageGeometry, NO_POINT, PairLooming, mask};
 use crate::model::Scan;
-use crate::objects::{NO_OBJECT, Object, PairObjects};
+use crate::objects::{NO_OBJECT, Object, PairObjects, cells_by_object};
 
 use super::EventConfig;
 use super::corridor::Corridor;
@@ -136,7 +136,7 @@ pub fn hot_clusters(
     // an object's footprint).
     let object_cells = objects
         .filter(|_| !components.is_empty())
-        .map(cells_by_object)
+        .map(|o| cells_by_object(&o.cell_object, o.objects.len()))
         .unwrap_or_default();
     components
         .into_iter()
@@ -269,17 +269,6 @@ fn connected_components(geometry: &ImageGeometry, hot: &[bool]) -> Vec<Vec<usize
         components.push(cells);
     }
     components
-}
-
-/// Per object (index in `objects.objects`), its cells.
-fn cells_by_object(objects: &PairObjects) -> Vec<Vec<usize>> {
-    let mut cells = vec![Vec::new(); objects.objects.len()];
-    for (cell, &object) in objects.cell_object.iter().enumerate() {
-        if let Some(list) = cells.get_mut(object as usize) {
-            list.push(cell);
-        }
-    }
-    cells
 }
 
 fn describe(
