@@ -26,6 +26,9 @@ fn main() {
     let mut per_track: BTreeMap<u32, (usize, usize)> = BTreeMap::new();
     let (mut objects_total, mut ms) = (0usize, 0.0f64);
     let (mut from_track, mut assumed_static) = (0usize, 0usize);
+    // Sightings not flagged moving whose looming reads over 1 1/s (a time
+    // to contact under a second): on these logs' static worlds, errors.
+    let mut wild = 0usize;
     looming::pipeline::replay(
         std::path::Path::new(&path),
         &looming::pipeline::ScanOptions::default(),
@@ -51,6 +54,7 @@ fn main() {
                 }
                 seen += 1;
                 let measured = object.looming_per_s.is_some();
+                wild += usize::from(is_wild(pair.index, object));
                 if !measured && std::env::var_os("PROBE_WHY").is_some() {
                     print_why(&objects, &result, object);
                 }
@@ -88,7 +92,29 @@ fn main() {
     println!(
         "  of the sightings: {from_track} from their track's range rate, {assumed_static} assumed static (ego motion alone)"
     );
+    println!("  not flagged moving with |looming| > 1 1/s: {wild}");
     print_static_d(&mut static_abs_d);
+}
+
+/// A sighting not flagged moving whose looming reads over 1 1/s; printed
+/// with `PROBE_WILD`.
+fn is_wild(pair_index: u64, object: &looming::objects::Object) -> bool {
+    let wild = object.looming_per_s.is_some_and(|l| l.abs() > 1.0) && !object.moving;
+    if wild && std::env::var_os("PROBE_WILD").is_some() {
+        println!(
+            "  wild: pair {pair_index} id {} age {} pts {} r {:.2} brg {:.0} L {:.2} lidar {:?} cells {} from track {}",
+            object.id,
+            object.age_pairs,
+            object.points,
+            object.nearest_range_m,
+            object.bearing_deg,
+            object.looming_per_s.unwrap_or(f64::NAN),
+            object.lidar_looming_per_s,
+            object.measured_cells,
+            object.looming_from_track
+        );
+    }
+    wild
 }
 
 /// The median |D| of the sightings not flagged moving.

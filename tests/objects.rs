@@ -153,3 +153,77 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
         "{trusted_before} -> {trusted_after} of {car_cells} car cells trusted"
     );
 }
+
+/// A followed object's cells whose `L_lidar` says their rays met something
+/// far behind it in the previous scan (a wall behind a box, seen past its
+/// edge) do not measure its approach, even unflagged: on the committed
+/// cut-in, a static object's cells are given the looming of rays that
+/// lengthened by 10 m over the pair (20 1/s and more), and the tracker
+/// measures it on no cell: its looming is the ego prediction along its
+/// rays, as its cells gave untouched.
+#[test]
+fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
+    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
+    use looming::objects::{ObjectConfig, ObjectTracker, PairObjects};
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let (config, object_config) = (EngineConfig::default(), ObjectConfig::default());
+    let mut cache = EngineCache::default();
+    let mut tracker = ObjectTracker::default();
+    let mut checked = 0;
+    looming::pipeline::replay(
+        &input,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let Some(result) = compute_with_cache(&pair, &config, &mut cache) else {
+                return;
+            };
+            let mut untouched = PairObjects::find(&pair.current, &result, &object_config);
+            let before = tracker.clone();
+            tracker.update(&mut untouched, &result, pair.dt_s);
+            // A static object followed since the last pair, its looming
+            // measured on its cells.
+            let Some((index, object)) = untouched.objects.iter().enumerate().find(|(_, o)| {
+                o.age_pairs >= 2
+                    && !o.moving
+                    && o.measured_cells >= 20
+                    && !o.looming_from_track
+                    && o.nearest_range_m < 30.0
+            }) else {
+                return;
+            };
+            let mut planted = result.clone();
+            for cell in 0..untouched.cell_object.len() {
+                if untouched.cell_object[cell] == index as u32 && planted.l_lidar[cell].is_finite()
+                {
+                    let range_m = planted.image.range_m[cell];
+                    planted.l_lidar[cell] = 10.0 / (range_m * pair.dt_s as f32);
+                    planted.disagreement[cell] = planted.l_lidar[cell] - planted.l_ray_ego[cell];
+                }
+            }
+            let mut objects = PairObjects::find(&pair.current, &planted, &object_config);
+            let mut tracker_planted = before;
+            tracker_planted.update(&mut objects, &planted, pair.dt_s);
+            let same = objects
+                .objects
+                .iter()
+                .find(|o| o.id == object.id)
+                .expect("the same object, the same id");
+            let looming = same.looming_per_s.expect("the ego prediction");
+            assert!(same.looming_assumed_static, "{same:?}");
+            assert_eq!(same.measured_cells, 0, "{same:?}");
+            assert_eq!(same.lidar_looming_per_s, None, "{same:?}");
+            let untouched_looming = object.looming_per_s.unwrap();
+            assert!(
+                (looming - untouched_looming).abs() < 0.02,
+                "{looming} predicted against {untouched_looming} from its cells"
+            );
+            checked += 1;
+        },
+    )
+    .unwrap();
+    assert!(
+        checked >= 10,
+        "{checked} pairs with a followed static object"
+    );
+}

@@ -7,7 +7,8 @@
 //! one. A current object without a match starts a track; a track without a
 //! match survives [`MAX_MISSED_PAIRS`] pairs.
 
-use super::{Object, PairObjects};
+use super::measure::keep_cells_seen_before;
+use super::{Object, PairObjects, cells_by_object};
 use crate::engine::PairLooming;
 
 /// Pairs a track survives without a match.
@@ -39,6 +40,10 @@ struct Track {
     velocity_pairs: u32,
     /// Its object's nearest range in its last pair, m.
     nearest_range_m: f64,
+    /// The ranges its object's box spanned in its last pair, m.
+    range_span_m: (f64, f64),
+    /// Its object moved on its own in its last pair (its `D`).
+    moving: bool,
 }
 
 /// Gives the objects of each pair their stable ids.
@@ -78,12 +83,25 @@ impl ObjectTracker {
                 track_taken[t] = true;
             }
         }
+        let cells = cells_by_object(&objects.cell_object, objects.objects.len());
         let mut next_tracks = Vec::new();
         for (o, object) in objects.objects.iter_mut().enumerate() {
-            if let Some(t) = object_track[o]
-                && self.tracks[t].missed == 0
-            {
-                looming_from_range(object, self.tracks[t].nearest_range_m, dt_s);
+            if let Some(t) = object_track[o] {
+                let track = &self.tracks[t];
+                // Its span as last seen, `missed` pairs before the last.
+                let since_s = dt_s * f64::from(track.missed + 1);
+                // How far the object's nearest return moved since: its own
+                // motion and the ego's along its rays, as seen.
+                let moved_m = (object.nearest_range_m - track.nearest_range_m).abs();
+                let motion = ((ego_v, ego_w), moved_m);
+                let spans_m = [
+                    widened(track.range_span_m, motion, since_s),
+                    widened(range_span(object), motion, since_s),
+                ];
+                let still = !track.moving;
+                if !keep_cells_seen_before(object, looming, &cells[o], (spans_m, still), dt_s) {
+                    looming_from_range(object, track.nearest_range_m, since_s);
+                }
             }
             let track = match object_track[o] {
                 Some(t) => self.continued(t, object, ego_v, ego_w, dt_s),
@@ -118,6 +136,8 @@ impl ObjectTracker {
             velocity_mps: [0.0; 3],
             velocity_pairs: 1,
             nearest_range_m: object.nearest_range_m,
+            range_span_m: range_span(object),
+            moving: object.moving,
         }
     }
 
@@ -155,6 +175,8 @@ impl ObjectTracker {
             velocity_mps,
             velocity_pairs,
             nearest_range_m: object.nearest_range_m,
+            range_span_m: range_span(object),
+            moving: object.moving,
         }
     }
 }
@@ -164,7 +186,8 @@ impl ObjectTracker {
 /// cells) takes it from its track instead: `-(r_now - r_before) / (dt
 /// r_now)` of its nearest range (10th percentile of its cells' ranges), the
 /// same quantity over the object, with the standard error of two such
-/// percentiles ([`NEAREST_RANGE_NOISE_M`] each).
+/// percentiles ([`NEAREST_RANGE_NOISE_M`] each). `dt_s` is the time since
+/// the track was last seen (over a missed pair, the mean over both).
 fn looming_from_range(object: &mut Object, range_before_m: f64, dt_s: f64) {
     let range_m = object.nearest_range_m;
     // A looming assumed from the ego motion gives way to a measured one.
@@ -213,6 +236,40 @@ fn predict(track: &Track, v: [f64; 3], w: [f64; 3], dt_s: f64) -> [f64; 3] {
 fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
+
+/// The ranges an object's box spans, m: from its point nearest the sensor
+/// to its farthest corner.
+fn range_span(object: &Object) -> (f64, f64) {
+    let (mut near_sq, mut far_sq) = (0.0, 0.0);
+    for k in 0..3 {
+        let (lo, hi) = (object.min_m[k], object.max_m[k]);
+        let nearest = 0.0f64.clamp(lo, hi);
+        near_sq += nearest * nearest;
+        far_sq += (lo * lo).max(hi * hi);
+    }
+    (near_sq.sqrt(), far_sq.sqrt())
+}
+
+/// A track's range span as the cells of its next pair may have seen it:
+/// widened by [`SPAN_MARGIN_M`], by how far the ego motion over `dt_s`
+/// moves a point of its far end along a ray, and by how far its nearest
+/// return moved (`moved_m`: an object approaching fast shows more of
+/// itself each scan, its side's returns beyond its last span).
+fn widened(
+    (near_m, far_m): (f64, f64),
+    ((ego_v, ego_w), moved_m): (([f64; 3], [f64; 3]), f64),
+    dt_s: f64,
+) -> (f64, f64) {
+    let norm = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let ego_m = (norm(ego_v) + norm(ego_w) * far_m) * dt_s.abs();
+    let margin_m = SPAN_MARGIN_M + ego_m + moved_m.max(0.0);
+    (near_m - margin_m, far_m + margin_m)
+}
+
+/// Range beyond a track's last span a cell's previous return may lie and
+/// still have been on the same object (its sampling, its own motion over a
+/// pair), m.
+const SPAN_MARGIN_M: f64 = 0.5;
 
 /// Horizontal extent (diagonal of the box), m.
 fn extent(object: &Object) -> f64 {
@@ -269,6 +326,24 @@ mod tests {
         let mut first = object(9.5, None);
         looming_from_range(&mut first, 10.0, 0.0);
         assert_eq!(first.looming_per_s, None);
+    }
+
+    #[test]
+    fn a_tracks_range_span_is_its_box_widened_by_what_moved() {
+        // Box x 9.5..10.5, y -0.5..0.5, z -1..0.5: nearest 9.5 m (straight
+        // ahead), farthest corner sqrt(10.5^2 + 0.5^2 + 1).
+        let o = object(9.5, Some(0.0));
+        let (near_m, far_m) = range_span(&o);
+        assert!((near_m - 9.5).abs() < 1e-12, "{near_m}");
+        assert!((far_m - (10.5f64.powi(2) + 0.25 + 1.0).sqrt()).abs() < 1e-12);
+        // Still: the margin alone; at 10 m/s over 0.1 s, a metre more; and
+        // by how far the nearest return moved.
+        let still = widened((9.5, 11.0), (([0.0; 3], [0.0; 3]), 0.0), 0.1);
+        assert_eq!(still, (9.5 - SPAN_MARGIN_M, 11.0 + SPAN_MARGIN_M));
+        let driving = widened((9.5, 11.0), (([10.0, 0.0, 0.0], [0.0; 3]), 0.3), 0.1);
+        let margin_m = SPAN_MARGIN_M + 1.0 + 0.3;
+        assert!((driving.0 - (9.5 - margin_m)).abs() < 1e-12, "{driving:?}");
+        assert!((driving.1 - (11.0 + margin_m)).abs() < 1e-12, "{driving:?}");
     }
 
     #[test]
