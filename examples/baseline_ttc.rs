@@ -502,7 +502,7 @@ impl State<'_> {
     fn engine_object_looming(&mut self, pair: &ScanPair, near: &[usize]) -> Option<f64> {
         let result: PairLooming = engine::compute_with_cache(pair, &self.config, &mut self.cache)?;
         let mut objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
-        self.tracker.update(&mut objects, &result, pair.dt_s);
+        self.tracker.update(&mut objects, &result, pair.step_s);
         let ids: Vec<Option<u32>> = near
             .iter()
             .map(|&i| objects.object_of_point(&result, i))

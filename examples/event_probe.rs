@@ -101,7 +101,7 @@ fn main() {
                 &mut looming,
                 (&object_config, &engine.threat_ttc_s),
                 &mut tracker,
-                pair.dt_s,
+                pair.step_s,
             );
             let t_s = drive_time_s(pair.current.stamp_ns);
             let stamp = pair.current.stamp_ns;

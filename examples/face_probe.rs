@@ -139,7 +139,7 @@ fn main() {
                 &mut result,
                 (&object_config, &config.threat_ttc_s),
                 &mut tracker,
-                pair.dt_s,
+                pair.step_s,
             );
             if let Some(face) = face_of(&pair.current, &result, &objects, &b) {
                 faces.push(face);

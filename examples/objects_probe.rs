@@ -43,7 +43,7 @@ fn main() {
                 &mut result,
                 (&object_config, &config.threat_ttc_s),
                 &mut tracker,
-                pair.dt_s,
+                pair.step_s,
             );
             ms += started.elapsed().as_secs_f64() * 1e3;
             pairs += 1;

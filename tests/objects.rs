@@ -227,3 +227,64 @@ fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
         "{checked} pairs with a followed static object"
     );
 }
+
+/// An object moving on its own flags moving its cells that disagree with
+/// the ego prediction but lie outside the engine's moving patches (a car
+/// seen by one beam of a side sensor): on the committed cut-in, the car's
+/// cells are taken out of the patches and the objects stage puts them back,
+/// their fused looming their own `L_lidar` (combined with the car's value),
+/// not the ego prediction.
+#[test]
+fn a_moving_objects_disagreeing_cells_are_moving_though_outside_a_patch() {
+    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
+    use looming::objects::{ObjectConfig, ObjectTracker, PairObjects, fuse_objects};
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let config = EngineConfig::default();
+    let mut cache = EngineCache::default();
+    let mut tracker = ObjectTracker::default();
+    let mut checked = 0;
+    looming::pipeline::replay(
+        &input,
+        &looming::pipeline::ScanOptions::default(),
+        &mut |_| {},
+        &mut |pair| {
+            let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) else {
+                return;
+            };
+            let mut objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
+            tracker.update(&mut objects, &result, pair.step_s);
+            let Some(index) = objects.objects.iter().position(|o| o.moving) else {
+                return;
+            };
+            let taken_out: Vec<usize> = (0..objects.cell_object.len())
+                .filter(|&c| objects.cell_object[c] == index as u32 && result.moving[c])
+                .collect();
+            if taken_out.len() < 5 {
+                return;
+            }
+            for &cell in &taken_out {
+                result.moving[cell] = false;
+                result.fused[cell] = result.l_ray_ego[cell];
+            }
+            let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
+            assert!(counts.confirmed_moving >= taken_out.len(), "{counts:?}");
+            for &cell in &taken_out {
+                assert!(result.moving[cell], "cell {cell} not moving again");
+                // Its own measurement (then combined with its object's
+                // value), not the ego prediction it was given.
+                let (fused, lidar, ego) = (
+                    result.fused[cell],
+                    result.l_lidar[cell],
+                    result.l_ray_ego[cell],
+                );
+                assert!(
+                    (fused - lidar).abs() < 0.1 && (fused - lidar).abs() < (fused - ego).abs(),
+                    "fused {fused}, its L_lidar {lidar}, the ego prediction {ego}"
+                );
+            }
+            checked += 1;
+        },
+    )
+    .unwrap();
+    assert!(checked >= 5, "{checked} pairs with a moving object");
+}

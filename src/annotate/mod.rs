@@ -339,7 +339,7 @@ impl Annotator {
             &mut looming,
             (&self.config.objects, &self.config.engine.threat_ttc_s),
             &mut self.tracker,
-            pair.dt_s,
+            pair.step_s,
         );
         self.stats.stages.objects_s += started.elapsed().as_secs_f64();
         let started = Instant::now();

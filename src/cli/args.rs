@@ -373,6 +373,12 @@ pub(crate) struct ScanArgs {
     /// [default: 3 nominal scan periods].
     #[arg(long, value_name = "SECONDS")]
     pub(crate) max_gap: Option<f64>,
+    /// Shortest time a pair of scans spans, seconds: a sensor faster than
+    /// this pairs each scan with the one this long before it (a 20 Hz
+    /// sensor over two periods: half the looming noise, still a pair per
+    /// scan); 0 pairs consecutive scans at any rate [docs/method.md].
+    #[arg(long, value_name = "SECONDS", default_value_t = looming::pairing::stride::DEFAULT_MIN_BASELINE_S)]
+    pub(crate) min_baseline: f64,
     /// Reorder window for logs read in file order, seconds of log time.
     #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
     pub(crate) reorder_window: f64,

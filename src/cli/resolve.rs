@@ -68,6 +68,11 @@ pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
             "--max-gap must be a positive number of seconds".into(),
         ));
     }
+    if !(args.min_baseline.is_finite() && (0.0..=1.0).contains(&args.min_baseline)) {
+        return Err(usage(
+            "--min-baseline must be between 0 and 1 second".into(),
+        ));
+    }
     let cli_extrinsic = match &args.extrinsic {
         Some(text) => Some(
             parse_extrinsic(text)
@@ -88,6 +93,7 @@ pub(crate) fn scan_options(args: &ScanArgs) -> Result<ScanOptions, Failure> {
         },
         pairing: PairingConfig {
             max_gap_s: args.max_gap,
+            min_baseline_s: args.min_baseline,
             cli_extrinsic,
             sensor_frame: args.sensor_frame.clone(),
             ..PairingConfig::default()

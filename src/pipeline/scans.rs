@@ -10,6 +10,7 @@ use crate::decode::{self, DecodeLimits};
 use crate::input::{Catalog, InputError, InputOptions, ReadReport};
 use crate::model::{Decoded, ScanPair, format_log_time};
 use crate::pairing::split::split_by_sensor;
+use crate::pairing::stride::Strider;
 use crate::pairing::{PairEvent, PairingConfig, PairingStats, ScanPairer};
 use crate::topics::{Role, SelectedChannel, TopicOverrides, TopicSelection};
 
@@ -168,6 +169,8 @@ impl BadMessages {
 /// what failed, feeds the pairer and keeps its warnings.
 pub(crate) struct PairingStage {
     pairer: ScanPairer,
+    /// The pairer's pairs joined to span the shortest baseline.
+    strider: Strider,
     pub(crate) decoded: DecodedCounts,
     pub(crate) bad: BadMessages,
     pub(crate) warnings: Vec<String>,
@@ -188,6 +191,7 @@ impl PairingStage {
         }
         Self {
             pairer,
+            strider: Strider::new(options.pairing.min_baseline_s),
             decoded: DecodedCounts::default(),
             bad: BadMessages::default(),
             warnings: Vec::new(),
@@ -219,7 +223,7 @@ impl PairingStage {
         let mut pairs = Vec::new();
         for event in events {
             match event {
-                PairEvent::Pair(pair) => pairs.push(pair),
+                PairEvent::Pair(pair) => pairs.push(self.strider.push(pair)),
                 PairEvent::Warning(warning) => self.warnings.push(warning),
             }
         }

@@ -274,6 +274,7 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::mo
     }
     crate::model::ScanPair {
         dt_s: world.period_s,
+        step_s: world.period_s,
         previous_log_time_ns: 0,
         current_log_time_ns: 0,
         index,

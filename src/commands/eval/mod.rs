@@ -346,7 +346,7 @@ impl<'c> EvalState<'c> {
             &mut result,
             (&ObjectConfig::default(), &self.config.threat_ttc_s),
             &mut self.tracker,
-            pair.dt_s,
+            pair.step_s,
         );
         self.accumulator
             .add_pair(&pair.current, (&result, &engine), &objects, truth);

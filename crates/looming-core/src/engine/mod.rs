@@ -54,11 +54,13 @@ use cells::per_cell;
 use surface::{SurfaceParams, Surfaces};
 use trajectory::{MotionModel, Trajectory};
 
-/// The gridded scan and its surfaces, kept from one pair to the next: the
-/// current scan of pair j is the previous scan of pair j+1.
+/// The gridded scans and their surfaces, kept from one pair to the next: the
+/// current scan of pair j is the previous scan of pair j+1, or of a later
+/// pair where pairs span several scans ([`crate::pairing::stride`]).
 #[derive(Default)]
 pub struct EngineCache {
-    last: Option<CachedScan>,
+    /// The last pairs' current scans, oldest first.
+    recent: std::collections::VecDeque<CachedScan>,
     /// The sensor's per-laser range offsets, averaged over the log's scans.
     range_bias: bias::RangeBias,
     /// Pairs whose previous scan's image and surfaces came from the cache.
@@ -66,12 +68,35 @@ pub struct EngineCache {
 }
 
 impl EngineCache {
+    /// What the cache holds of `scan` (nothing of any other), taken out with
+    /// every scan older than it: pairs come in time order.
+    fn take(&mut self, scan: &std::sync::Arc<Scan>) -> Option<CachedScan> {
+        let at = self
+            .recent
+            .iter()
+            .position(|c| std::sync::Arc::ptr_eq(&c.scan, scan))?;
+        self.recent.drain(..at);
+        self.recent.pop_front()
+    }
+
+    /// A pair's current scan, for a later pair; at most
+    /// [`CACHED_SCANS`] are held.
+    fn keep(&mut self, scan: CachedScan) {
+        if self.recent.len() >= CACHED_SCANS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(scan);
+    }
+
     /// Pairs so far whose previous scan's image and surfaces were reused
     /// (all but the first of a stream, while its geometry holds).
     pub fn reused_scans(&self) -> u64 {
         self.reused_scans
     }
 }
+
+/// Scans the cache holds: a pair spans at most four of a sensor's periods.
+const CACHED_SCANS: usize = 4;
 
 struct CachedScan {
     scan: std::sync::Arc<Scan>,
@@ -149,10 +174,7 @@ pub fn compute_with_cache(
     // What the cache holds of this pair's previous scan (nothing of any
     // other): its columns, kept where this scan allows so that the cache
     // holds, and the motion estimated up to it.
-    let last = cache
-        .last
-        .take()
-        .filter(|c| std::sync::Arc::ptr_eq(&c.scan, &pair.previous));
+    let last = cache.take(&pair.previous);
     let geometry = grid::geometry_for(
         previous,
         current,
@@ -221,7 +243,7 @@ pub fn compute_with_cache(
         (previous_estimate, times),
     );
     let estimate = result.as_ref().and_then(|r| r.ego_estimate);
-    cache.last = Some(CachedScan::keep(
+    cache.keep(CachedScan::keep(
         pair,
         &geometry,
         cur_image,

@@ -312,13 +312,13 @@ impl EventDetector {
             (a, b) => a.or(b),
         };
         let margin = association_margin_cols(&looming.geometry);
-        let slot = self.slot_of(stamp_ns, pair.dt_s);
+        let slot = self.slot_of(stamp_ns, pair.step_s);
         let mut ended = self.close_stale(slot);
         let sample = Sample {
             pair_index: slot,
             stamp_ns,
             log_time_ns: pair.current_log_time_ns,
-            period_ns: ((pair.dt_s * 1e9).round() as i64).max(1),
+            period_ns: ((pair.step_s * 1e9).round() as i64).max(1),
             ego_speed_mps: velocity.map(|v| v.norm()),
         };
         for cluster in clusters {

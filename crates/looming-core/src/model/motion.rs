@@ -39,6 +39,29 @@ impl TimeSeries {
         &self.samples
     }
 
+    /// The samples of `self` and of `later` (a series of the same source
+    /// over a later interval, whose tolerances it keeps), each stamp once.
+    pub fn joined(&self, later: &TimeSeries) -> TimeSeries {
+        let mut samples: Vec<(StampNs, Vector3<f64>)> = self
+            .samples
+            .iter()
+            .filter(|(stamp_ns, _)| {
+                later
+                    .samples
+                    .binary_search_by_key(stamp_ns, |s| s.0)
+                    .is_err()
+            })
+            .chain(later.samples.iter())
+            .copied()
+            .collect();
+        samples.sort_by_key(|(stamp_ns, _)| *stamp_ns);
+        TimeSeries {
+            samples,
+            hold_ns: later.hold_ns,
+            max_interpolation_gap_ns: later.max_interpolation_gap_ns,
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.samples.len()
     }
@@ -149,6 +172,24 @@ pub struct PairMotion {
 }
 
 impl PairMotion {
+    /// The motion over this interval and the `later` one that follows it:
+    /// each series' samples joined (a quantity either lacks is lacking), the
+    /// later's extrinsics and source.
+    pub fn joined(&self, later: &PairMotion) -> PairMotion {
+        let join = |a: &Option<TimeSeries>, b: &Option<TimeSeries>| match (a, b) {
+            (Some(a), Some(b)) => Some(a.joined(b)),
+            _ => None,
+        };
+        PairMotion {
+            velocity: join(&self.velocity, &later.velocity),
+            angular: join(&self.angular, &later.angular),
+            velocity_unavailable: self.velocity_unavailable || later.velocity_unavailable,
+            imu_unavailable: self.imu_unavailable || later.imu_unavailable,
+            coverage_complete: self.coverage_complete && later.coverage_complete,
+            ..later.clone()
+        }
+    }
+
     pub fn velocity_at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
         self.velocity.as_ref()?.at(stamp_ns)
     }

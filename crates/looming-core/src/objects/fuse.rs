@@ -90,6 +90,9 @@ pub struct FusionCounts {
     pub combined: usize,
     /// Cells without a value of their own that took their object's.
     pub filled: usize,
+    /// Cells that disagreed with the ego prediction outside a moving patch,
+    /// flagged moving by their object's motion ([`confirm_moving_cells`]).
+    pub confirmed_moving: usize,
 }
 
 /// Combine every object's looming into its cells' fused looming (see the
@@ -104,6 +107,7 @@ pub fn fuse_objects(
     let mut counts = FusionCounts::default();
     let cells_of = cells_by_object(&objects.cell_object, objects.objects.len());
     for (object, cells) in objects.objects.iter().zip(&cells_of) {
+        counts.confirmed_moving += confirm_moving_cells(looming, object, cells, threat_ttc_s);
         let Some(value) = object_value(object) else {
             continue;
         };
@@ -176,6 +180,41 @@ pub fn fuse_objects(
     }
     refresh_point_threats(looming);
     counts
+}
+
+/// The cells of an object moving on its own (its `D` significant over all
+/// its cells) that disagree with the ego prediction its way, but were left
+/// out of the engine's moving patches (which a lone beam's line cannot
+/// join, lest the junction of road and wall pass for a mover): moving,
+/// their fused looming their own measurement. A car followed beside a side
+/// sensor at 20 Hz shows it one beam: its 139 cells read `L_lidar` within
+/// 0.002 1/s, and fused halfway to the ego prediction (0.27 1/s off) before.
+/// How many were flagged.
+fn confirm_moving_cells(
+    looming: &mut PairLooming,
+    object: &Object,
+    cells: &[usize],
+    threat_ttc_s: &[f64; 3],
+) -> usize {
+    let Some(d_object) = object.disagreement_per_s.filter(|_| object.moving) else {
+        return 0;
+    };
+    let mut confirmed = 0;
+    for &cell in cells {
+        let d_cell = looming.disagreement[cell];
+        if looming.disagrees[cell]
+            && !looming.moving[cell]
+            && looming.mask[cell] == 0
+            && f64::from(d_cell).signum() == d_object.signum()
+        {
+            looming.moving[cell] = true;
+            looming.fused[cell] = looming.l_lidar[cell];
+            looming.fused_sigma_per_s[cell] = looming.sigma_per_s[cell];
+            looming.threat[cell] = ThreatLevel::of(f64::from(looming.l_lidar[cell]), threat_ttc_s);
+            confirmed += 1;
+        }
+    }
+    confirmed
 }
 
 /// The object's looming and standard error, when measured.

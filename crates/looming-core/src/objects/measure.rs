@@ -195,14 +195,13 @@ pub(super) fn keep_cells_seen_before(
     looming: &PairLooming,
     cells: &[usize],
     (spans_m, still): ([(f64, f64); 2], bool),
-    dt_s: f64,
 ) -> bool {
     if object.looming_per_s.is_none() || object.looming_assumed_static {
         return false;
     }
     let seen_before = |c: usize| {
         let range_m = f64::from(looming.image.range_m[c]);
-        let before_m = range_m * (1.0 + f64::from(looming.l_lidar[c]) * dt_s);
+        let before_m = range_m * (1.0 + f64::from(looming.l_lidar[c] * looming.dt_s[c]));
         spans_m
             .iter()
             .any(|(near_m, far_m)| (*near_m..=*far_m).contains(&before_m))

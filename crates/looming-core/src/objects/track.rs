@@ -99,7 +99,7 @@ impl ObjectTracker {
                     widened(range_span(object), motion, since_s),
                 ];
                 let still = !track.moving;
-                if !keep_cells_seen_before(object, looming, &cells[o], (spans_m, still), dt_s) {
+                if !keep_cells_seen_before(object, looming, &cells[o], (spans_m, still)) {
                     looming_from_range(object, track.nearest_range_m, since_s);
                 }
             }

@@ -18,26 +18,26 @@
 //! as pairs go out, so memory is bounded however long the log.
 
 mod buffer;
+mod config;
 pub mod frames;
 mod history;
 pub mod motion;
 pub mod origin;
 pub mod split;
 mod stats;
+pub mod stride;
 
 use buffer::{InsertOutcome, SampleBuffer};
+pub use config::PairingConfig;
 pub use stats::PairingStats;
-
-use std::collections::{HashSet, VecDeque};
-use std::mem;
-use std::sync::Arc;
-
-use nalgebra::Isometry3;
 
 pub use frames::{
     Extrinsic, ExtrinsicParseError, TransformTree, normalize_frame_id, parse_extrinsic,
     resolve_extrinsic,
 };
+use std::collections::{HashSet, VecDeque};
+use std::mem;
+use std::sync::Arc;
 
 use crate::engine::layout;
 use crate::model::motion::seconds_to_ns;
@@ -66,45 +66,6 @@ pub(crate) const MAX_BUFFERED_SAMPLES_PER_SOURCE: usize = 50_000;
 /// Without a known maximum gap, a backwards stamp jump larger than this is
 /// taken as a clock reset rather than jitter.
 const CLOCK_RESET_FALLBACK_S: f64 = 1.0;
-
-/// Pairing policies.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct PairingConfig {
-    /// Maximum dt, in nominal periods, for two scans to form a pair.
-    pub max_gap_periods: f64,
-    /// Maximum dt in seconds; overrides `max_gap_periods` when set.
-    pub max_gap_s: Option<f64>,
-    /// `motion_from_lidar` from the command line (LiDAR pose in the
-    /// velocity/IMU frame); overrides `/tf_static` for both sources.
-    #[serde(rename = "extrinsic", serialize_with = "frames::serialize_extrinsic")]
-    pub cli_extrinsic: Option<Isometry3<f64>>,
-    /// A velocity topic exists: pending pairs wait for its samples.
-    #[serde(skip)]
-    pub has_velocity_source: bool,
-    /// An IMU topic exists: pending pairs wait for its samples.
-    #[serde(skip)]
-    pub has_imu_source: bool,
-    /// How far motion is held beyond the first/last sample, seconds.
-    pub motion_hold_s: f64,
-    /// The sensor's frame (`--sensor-frame`), for clouds published in
-    /// another frame (`origin`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub sensor_frame: Option<String>,
-}
-
-impl Default for PairingConfig {
-    fn default() -> Self {
-        Self {
-            max_gap_periods: 3.0,
-            max_gap_s: None,
-            cli_extrinsic: None,
-            has_velocity_source: false,
-            has_imu_source: false,
-            motion_hold_s: 0.2,
-            sensor_frame: None,
-        }
-    }
-}
 
 // Pairs are the common variant (one per scan, ~10 Hz) and move by value once;
 // boxing them would only add an allocation per scan.
@@ -483,8 +444,10 @@ impl ScanPairer {
         let coverage_complete = coverage_complete || self.motion_covers(current.end_ns);
         let motion = self.pair_motion(&previous, &current, coverage_complete, &mut events);
         self.count_pair(&motion);
+        let dt_s = (current.stamp_ns() - previous.stamp_ns()) as f64 * 1e-9;
         let pair = ScanPair {
-            dt_s: (current.stamp_ns() - previous.stamp_ns()) as f64 * 1e-9,
+            dt_s,
+            step_s: dt_s,
             previous: previous.scan,
             current: Arc::clone(&current.scan),
             motion,

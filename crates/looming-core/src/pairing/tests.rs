@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::model::{AngularSource, ExtrinsicSource, VelocitySourceKind};
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Vector3};
 
 const MS: i64 = 1_000_000;
 
