@@ -149,7 +149,28 @@ fn layout_lines(out: &mut String, s: &RunSummary) {
                 s.pairing.ring_fields_dropped
             );
         }
+        if let Some(track) = &s.pairing.sensor_track {
+            let _ = writeln!(out, "                {}", track_text(track));
+        }
     }
+}
+
+/// The sensor placed from its rings at every scan, in a line: how many
+/// scans, how well, at what cost.
+fn track_text(track: &looming::pairing::SensorTrackStats) -> String {
+    format!(
+        "sensor placed from its rings at every scan: {} scans, {} by the local search ({:.1} ms per scan, max {:.1}), {} by the full search ({:.0} ms each), {} failed; ring spread mean {:.4} deg (max {:.4}); its turn from the sweeps' phase, held at {} steps",
+        track.scans,
+        track.scans - track.full_searches,
+        track.local_ms_per_scan_mean,
+        track.local_ms_per_scan_max,
+        track.full_searches,
+        track.full_search_ms_mean,
+        track.failed,
+        track.ring_spread_deg_mean,
+        track.ring_spread_deg_max,
+        track.yaw_held
+    )
 }
 
 /// Each sensor of a log with several LiDARs: its channels, layout, pairs
@@ -183,6 +204,9 @@ fn sensor_lines(out: &mut String, s: &RunSummary) {
             sensor.annotation.pairs_annotated,
             sensor.annotation.engine_s
         );
+        if let Some(track) = &sensor.pairing.sensor_track {
+            let _ = writeln!(out, "                   {}", track_text(track));
+        }
     }
 }
 

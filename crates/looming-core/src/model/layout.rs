@@ -193,7 +193,7 @@ impl fmt::Display for ScanLayout {
             .as_ref()
             .filter(|o| o.moves_points() || o.several_origins)
         {
-            write!(f, "; sensor at {}", origin.describe())?;
+            write!(f, "; sensor {}", origin.placement_text())?;
         }
         Ok(())
     }

@@ -145,6 +145,10 @@ pub enum AngularSource {
     Imu,
     /// Angular part of the velocity twist (no IMU samples for this pair).
     Twist,
+    /// The turn between the sensor's placements in its clouds' frame (a
+    /// world frame without `/tf`, the sensor placed from its rings at every
+    /// scan: `pairing::origin_track`), which also give the velocity.
+    Placements,
     Unavailable,
 }
 

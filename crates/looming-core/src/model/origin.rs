@@ -21,6 +21,12 @@ pub enum OriginSource {
     Tf,
     /// Estimated from the returns' elevations.
     Geometry,
+    /// Estimated from the returns' elevations again at every scan: the
+    /// sensor drives through its clouds' frame (a world frame with no `/tf`
+    /// to it). The rings give no yaw: the axes turn with the sweeps' phase
+    /// where the points carry their times (`pairing::origin_yaw`), else
+    /// keep the frame's.
+    RingsPerScan,
 }
 
 impl OriginSource {
@@ -31,6 +37,7 @@ impl OriginSource {
             OriginSource::TfStatic => "tf_static",
             OriginSource::Tf => "tf",
             OriginSource::Geometry => "geometry",
+            OriginSource::RingsPerScan => "rings_per_scan",
         }
     }
 }
@@ -85,6 +92,19 @@ impl SensorOrigin {
         self.cloud_from_sensor != Isometry3::identity()
     }
 
+    /// Where the sensor is, for a scan's layout in words: `at` and
+    /// [`describe`](Self::describe); for one placed at every scan, how
+    /// only (its position and its rings' spread change with every scan, and
+    /// are in the record; the words stay one layout for `quality`).
+    pub fn placement_text(&self) -> String {
+        match self.source {
+            OriginSource::RingsPerScan => "placed from the returns' elevations at every scan \
+                 (rings, per scan: it moves through the cloud's frame)"
+                .to_string(),
+            _ => format!("at {}", self.describe()),
+        }
+    }
+
     /// One line for the run summary.
     pub fn describe(&self) -> String {
         let [x, y, z] = self.position_m;
@@ -103,6 +123,11 @@ impl SensorOrigin {
                 self.sensor_frame.as_deref().unwrap_or("?")
             ),
             OriginSource::Geometry => "estimated from the returns' elevations".to_string(),
+            OriginSource::RingsPerScan => {
+                "estimated from the returns' elevations at every scan (rings, per scan: it moves \
+                 through the cloud's frame)"
+                    .to_string()
+            }
         };
         let spread = match (self.ring_spread_deg, self.cloud_origin_ring_spread_deg) {
             (Some(at), Some(cloud)) => {

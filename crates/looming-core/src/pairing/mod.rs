@@ -23,13 +23,17 @@ pub mod frames;
 mod history;
 pub mod motion;
 pub mod origin;
+mod origin_search;
+pub mod origin_track;
+mod origin_yaw;
+mod prepare;
 pub mod split;
 mod stats;
 pub mod stride;
 
 use buffer::{InsertOutcome, SampleBuffer};
 pub use config::PairingConfig;
-pub use stats::PairingStats;
+pub use stats::{PairingStats, SensorTrackStats};
 
 pub use frames::{
     Extrinsic, ExtrinsicParseError, TransformTree, normalize_frame_id, parse_extrinsic,
@@ -39,7 +43,6 @@ use std::collections::{HashSet, VecDeque};
 use std::mem;
 use std::sync::Arc;
 
-use crate::engine::layout;
 use crate::model::motion::seconds_to_ns;
 use crate::model::{
     Decoded, ExtrinsicInfo, ExtrinsicSource, FrameTransform, ImuSample, PairMotion, Scan, ScanPair,
@@ -134,8 +137,9 @@ pub struct ScanPairer {
     last_scan_stamp_ns: Option<StampNs>,
     /// Recent positive stamp differences of consecutive scans, seconds.
     recent_scan_dts_s: VecDeque<f64>,
-    /// Where the sensor is in its clouds' frame (`origin`), and `/tf`.
-    placement: origin::SensorPlacement,
+    /// Where the sensor is in its clouds' frame (`origin`, `origin_track`),
+    /// and `/tf`.
+    placement: origin_track::SensorPlacement,
 }
 
 impl ScanPairer {
@@ -155,7 +159,7 @@ impl ScanPairer {
             stats: PairingStats::default(),
             last_scan_stamp_ns: None,
             recent_scan_dts_s: VecDeque::with_capacity(LAYOUT_PERIOD_WINDOW_LEN),
-            placement: origin::SensorPlacement::default(),
+            placement: origin_track::SensorPlacement::default(),
         }
     }
 
@@ -241,56 +245,6 @@ impl ScanPairer {
                 Vec::new()
             }
         }
-    }
-
-    /// Moves the scan's points about its sensor's origin, found on the first
-    /// scan with points ([`origin::locate`]); the warnings that finding gave.
-    fn place_sensor(&mut self, scan: &mut Scan, period_s: f64) -> Vec<String> {
-        let sensor_frame = self.cfg.sensor_frame.as_deref();
-        let (warnings, found) =
-            self.placement
-                .place(scan, &self.transforms, sensor_frame, period_s);
-        self.stats.sensor_origin = found.or(self.stats.sensor_origin.take());
-        warnings
-    }
-
-    /// Recovers the scan's rings and times (`engine::layout::complete`) with
-    /// the scan period (`period_s`, from the stamps), and records the layout.
-    fn complete_layout(&mut self, scan: &mut Scan, period_s: f64) {
-        layout::complete(scan, period_s);
-        let kind = format!(
-            "{} / {}",
-            scan.layout.rings.kind(),
-            scan.layout.times.kind()
-        );
-        *self.stats.layout_kinds.entry(kind).or_default() += 1;
-        if scan.layout.ring_field_dropped.is_some() {
-            self.stats.ring_fields_dropped += 1;
-        }
-        if self.stats.layout.is_none() {
-            self.stats.layout = Some(scan.layout.clone());
-        }
-    }
-
-    /// The median of recent stamp differences (this scan's included), else
-    /// the nominal period, else `layout::DEFAULT_PERIOD_S`; clamped to
-    /// 0.02-0.5 s.
-    fn layout_period_s(&mut self, stamp_ns: StampNs) -> f64 {
-        if let Some(last) = self.last_scan_stamp_ns {
-            let dt_s = (stamp_ns - last) as f64 * 1e-9;
-            if dt_s > 0.0 {
-                if self.recent_scan_dts_s.len() == LAYOUT_PERIOD_WINDOW_LEN {
-                    self.recent_scan_dts_s.pop_front();
-                }
-                self.recent_scan_dts_s.push_back(dt_s);
-            }
-        }
-        self.last_scan_stamp_ns = Some(stamp_ns);
-        let (lo, hi) = LAYOUT_PERIOD_RANGE_S;
-        median(&self.recent_scan_dts_s)
-            .or(self.nominal_period_override_s)
-            .unwrap_or(layout::DEFAULT_PERIOD_S)
-            .clamp(lo, hi)
     }
 
     pub fn push_transforms(&mut self, transforms: &[FrameTransform], is_static: bool) {
@@ -482,6 +436,15 @@ impl ScanPairer {
         coverage_complete: bool,
         events: &mut Vec<PairEvent>,
     ) -> PairMotion {
+        // A sensor placed at every scan in its clouds' (world) frame: the
+        // placements are the motion, in the axes the scans were moved into.
+        if let Some(motion) = self.placement.motion(
+            previous.stamp_ns(),
+            current.stamp_ns(),
+            self.cfg.motion_hold_s,
+        ) {
+            return motion;
+        }
         let from_ns = previous.start_ns - self.hold_ns;
         let to_ns = current.end_ns + self.hold_ns;
         let twists = self.velocity.window(from_ns, to_ns);

@@ -41,7 +41,41 @@ pub struct PairingStats {
     /// Scans whose ring field was dropped (values that are not ring numbers).
     pub ring_fields_dropped: u64,
     /// Where the sensor is in its clouds' frame and how that was found
-    /// (`origin`), from the first scan with points.
+    /// (`origin`), from the first scan with points (or from the scan that
+    /// started placing it at every scan, `origin_track`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sensor_origin: Option<SensorOrigin>,
+    /// The sensor placed from its rings at every scan (it drives through
+    /// its clouds' frame, `origin_track`): what that cost and gave.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor_track: Option<SensorTrackStats>,
+}
+
+/// The per-scan placements of a sensor that drives through its clouds'
+/// frame (`origin_track`).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct SensorTrackStats {
+    /// Scans placed one by one (from the one that started it).
+    pub scans: u64,
+    /// Of those, placed by the full search (grid and simplex, about a
+    /// second): the first, and those the local search left spread.
+    pub full_searches: u64,
+    /// Of those, still spread after it: placed where the search left them,
+    /// their looming not to be trusted.
+    pub failed: u64,
+    /// Steps whose turn the sweeps' phase did not give (no per-point times,
+    /// or a phase the course disagrees with): the axes kept their yaw.
+    pub yaw_held: u64,
+    /// The rings' spread about the placements, mean and largest, deg.
+    pub ring_spread_deg_mean: f64,
+    pub ring_spread_deg_max: f64,
+    /// The time a placement by the local search took (its sample, the
+    /// simplex from the prediction and the checks), mean and largest, ms.
+    pub local_ms_per_scan_mean: f64,
+    pub local_ms_per_scan_max: f64,
+    /// The time a full search took, mean, ms.
+    pub full_search_ms_mean: f64,
+    /// Placements whose spread was measured (the mean's count).
+    #[serde(skip)]
+    pub(super) measured: u64,
 }
