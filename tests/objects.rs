@@ -87,62 +87,48 @@ fn the_cut_in_car_is_one_tracked_moving_object_with_the_near_miss_looming() {
 /// their fused looming is the car's.
 #[test]
 fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
-    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
+    use looming::engine::EngineConfig;
     use looming::objects::{ObjectConfig, PairObjects, fuse_objects};
-    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
     let config = EngineConfig::default();
-    let mut cache = EngineCache::default();
     let mut checked = 0;
     let (mut car_cells, mut trusted_before, mut trusted_after) = (0, 0, 0);
-    looming::pipeline::replay(
-        &input,
-        &looming::pipeline::ScanOptions::default(),
-        &mut |_| {},
-        &mut |pair| {
-            let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) else {
-                return;
-            };
-            let objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
-            // The car: the nearest approaching object within 15 degrees of ahead.
-            let Some((index, car)) = objects
-                .objects
-                .iter()
-                .enumerate()
-                .filter(|(_, o)| {
-                    o.bearing_deg.abs() < 15.0 && o.looming_per_s.is_some_and(|l| l > 0.5)
-                })
-                .min_by(|a, b| a.1.nearest_range_m.total_cmp(&b.1.nearest_range_m))
-            else {
-                return;
-            };
-            let car_looming = car.looming_per_s.unwrap();
-            let cells: Vec<usize> = (0..objects.cell_object.len())
-                .filter(|&c| objects.cell_object[c] == index as u32)
-                .collect();
-            let trusted = |r: &looming::engine::PairLooming| {
-                cells.iter().filter(|&&c| r.mask[c] == 0).count()
-            };
-            let before = trusted(&result);
-            let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
-            let after = trusted(&result);
-            assert!(after >= before, "{after} < {before}");
-            assert!(counts.combined > 0, "{counts:?}");
-            car_cells += cells.len();
-            trusted_before += before;
-            trusted_after += after;
-            let mut errors: Vec<f64> = cells
-                .iter()
-                .filter(|&&c| result.mask[c] == 0)
-                .map(|&c| (f64::from(result.fused[c]) - car_looming).abs())
-                .collect();
-            assert!(!errors.is_empty(), "no trusted car cell");
-            errors.sort_by(f64::total_cmp);
-            let median = errors[errors.len() / 2];
-            assert!(median < 0.05, "median |fused - car| {median}");
-            checked += 1;
-        },
-    )
-    .unwrap();
+    for_each_cut_in_pair(|pair, mut result| {
+        let objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
+        // The car: the nearest approaching object within 15 degrees of ahead.
+        let Some((index, car)) = objects
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| o.bearing_deg.abs() < 15.0 && o.looming_per_s.is_some_and(|l| l > 0.5))
+            .min_by(|a, b| a.1.nearest_range_m.total_cmp(&b.1.nearest_range_m))
+        else {
+            return;
+        };
+        let car_looming = car.looming_per_s.unwrap();
+        let cells: Vec<usize> = (0..objects.cell_object.len())
+            .filter(|&c| objects.cell_object[c] == index as u32)
+            .collect();
+        let trusted =
+            |r: &looming::engine::PairLooming| cells.iter().filter(|&&c| r.mask[c] == 0).count();
+        let before = trusted(&result);
+        let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
+        let after = trusted(&result);
+        assert!(after >= before, "{after} < {before}");
+        assert!(counts.combined > 0, "{counts:?}");
+        car_cells += cells.len();
+        trusted_before += before;
+        trusted_after += after;
+        let mut errors: Vec<f64> = cells
+            .iter()
+            .filter(|&&c| result.mask[c] == 0)
+            .map(|&c| (f64::from(result.fused[c]) - car_looming).abs())
+            .collect();
+        assert!(!errors.is_empty(), "no trusted car cell");
+        errors.sort_by(f64::total_cmp);
+        let median = errors[errors.len() / 2];
+        assert!(median < 0.05, "median |fused - car| {median}");
+        checked += 1;
+    });
     assert!(checked >= 5, "{checked} pairs with the car ahead");
     // Over the pairs: most of the car (its side, cutting in, is another face
     // and keeps the engine's judgement: 77 % in all at 2026-11-25), a tenth
@@ -163,65 +149,52 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
 /// rays, as its cells gave untouched.
 #[test]
 fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
-    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
     use looming::objects::{ObjectConfig, ObjectTracker, PairObjects};
-    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
-    let (config, object_config) = (EngineConfig::default(), ObjectConfig::default());
-    let mut cache = EngineCache::default();
+    let object_config = ObjectConfig::default();
     let mut tracker = ObjectTracker::default();
     let mut checked = 0;
-    looming::pipeline::replay(
-        &input,
-        &looming::pipeline::ScanOptions::default(),
-        &mut |_| {},
-        &mut |pair| {
-            let Some(result) = compute_with_cache(&pair, &config, &mut cache) else {
-                return;
-            };
-            let mut untouched = PairObjects::find(&pair.current, &result, &object_config);
-            let before = tracker.clone();
-            tracker.update(&mut untouched, &result, pair.dt_s);
-            // A static object followed since the last pair, its looming
-            // measured on its cells.
-            let Some((index, object)) = untouched.objects.iter().enumerate().find(|(_, o)| {
-                o.age_pairs >= 2
-                    && !o.moving
-                    && o.measured_cells >= 20
-                    && !o.looming_from_track
-                    && o.nearest_range_m < 30.0
-            }) else {
-                return;
-            };
-            let mut planted = result.clone();
-            for cell in 0..untouched.cell_object.len() {
-                if untouched.cell_object[cell] == index as u32 && planted.l_lidar[cell].is_finite()
-                {
-                    let range_m = planted.image.range_m[cell];
-                    planted.l_lidar[cell] = 10.0 / (range_m * pair.dt_s as f32);
-                    planted.disagreement[cell] = planted.l_lidar[cell] - planted.l_ray_ego[cell];
-                }
+    for_each_cut_in_pair(|pair, result| {
+        let mut untouched = PairObjects::find(&pair.current, &result, &object_config);
+        let before = tracker.clone();
+        tracker.update(&mut untouched, &result, pair.dt_s);
+        // A static object followed since the last pair, its looming
+        // measured on its cells.
+        let Some((index, object)) = untouched.objects.iter().enumerate().find(|(_, o)| {
+            o.age_pairs >= 2
+                && !o.moving
+                && o.measured_cells >= 20
+                && !o.looming_from_track
+                && o.nearest_range_m < 30.0
+        }) else {
+            return;
+        };
+        let mut planted = result.clone();
+        for cell in 0..untouched.cell_object.len() {
+            if untouched.cell_object[cell] == index as u32 && planted.l_lidar[cell].is_finite() {
+                let range_m = planted.image.range_m[cell];
+                planted.l_lidar[cell] = 10.0 / (range_m * pair.dt_s as f32);
+                planted.disagreement[cell] = planted.l_lidar[cell] - planted.l_ray_ego[cell];
             }
-            let mut objects = PairObjects::find(&pair.current, &planted, &object_config);
-            let mut tracker_planted = before;
-            tracker_planted.update(&mut objects, &planted, pair.dt_s);
-            let same = objects
-                .objects
-                .iter()
-                .find(|o| o.id == object.id)
-                .expect("the same object, the same id");
-            let looming = same.looming_per_s.expect("the ego prediction");
-            assert!(same.looming_assumed_static, "{same:?}");
-            assert_eq!(same.measured_cells, 0, "{same:?}");
-            assert_eq!(same.lidar_looming_per_s, None, "{same:?}");
-            let untouched_looming = object.looming_per_s.unwrap();
-            assert!(
-                (looming - untouched_looming).abs() < 0.02,
-                "{looming} predicted against {untouched_looming} from its cells"
-            );
-            checked += 1;
-        },
-    )
-    .unwrap();
+        }
+        let mut objects = PairObjects::find(&pair.current, &planted, &object_config);
+        let mut tracker_planted = before;
+        tracker_planted.update(&mut objects, &planted, pair.dt_s);
+        let same = objects
+            .objects
+            .iter()
+            .find(|o| o.id == object.id)
+            .expect("the same object, the same id");
+        let looming = same.looming_per_s.expect("the ego prediction");
+        assert!(same.looming_assumed_static, "{same:?}");
+        assert_eq!(same.measured_cells, 0, "{same:?}");
+        assert_eq!(same.lidar_looming_per_s, None, "{same:?}");
+        let untouched_looming = object.looming_per_s.unwrap();
+        assert!(
+            (looming - untouched_looming).abs() < 0.02,
+            "{looming} predicted against {untouched_looming} from its cells"
+        );
+        checked += 1;
+    });
     assert!(
         checked >= 10,
         "{checked} pairs with a followed static object"
@@ -236,55 +209,66 @@ fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
 /// not the ego prediction.
 #[test]
 fn a_moving_objects_disagreeing_cells_are_moving_though_outside_a_patch() {
-    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
+    use looming::engine::EngineConfig;
     use looming::objects::{ObjectConfig, ObjectTracker, PairObjects, fuse_objects};
+    let config = EngineConfig::default();
+    let mut tracker = ObjectTracker::default();
+    let mut checked = 0;
+    for_each_cut_in_pair(|pair, mut result| {
+        let mut objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
+        tracker.update(&mut objects, &result, pair.step_s);
+        let Some(index) = objects.objects.iter().position(|o| o.moving) else {
+            return;
+        };
+        let taken_out: Vec<usize> = (0..objects.cell_object.len())
+            .filter(|&c| objects.cell_object[c] == index as u32 && result.moving[c])
+            .collect();
+        if taken_out.len() < 5 {
+            return;
+        }
+        for &cell in &taken_out {
+            result.moving[cell] = false;
+            result.fused[cell] = result.l_ray_ego[cell];
+        }
+        let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
+        assert!(counts.confirmed_moving >= taken_out.len(), "{counts:?}");
+        for &cell in &taken_out {
+            assert!(result.moving[cell], "cell {cell} not moving again");
+            // Its own measurement (then combined with its object's
+            // value), not the ego prediction it was given.
+            let (fused, lidar, ego) = (
+                result.fused[cell],
+                result.l_lidar[cell],
+                result.l_ray_ego[cell],
+            );
+            assert!(
+                (fused - lidar).abs() < 0.1 && (fused - lidar).abs() < (fused - ego).abs(),
+                "fused {fused}, its L_lidar {lidar}, the ego prediction {ego}"
+            );
+        }
+        checked += 1;
+    });
+    assert!(checked >= 5, "{checked} pairs with a moving object");
+}
+
+/// Every pair of the committed cut-in through the engine as `process` runs
+/// it (one engine cache over the log), to `each` with its result.
+fn for_each_cut_in_pair(
+    mut each: impl FnMut(looming::model::ScanPair, looming::engine::PairLooming),
+) {
+    use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
     let config = EngineConfig::default();
     let mut cache = EngineCache::default();
-    let mut tracker = ObjectTracker::default();
-    let mut checked = 0;
     looming::pipeline::replay(
         &input,
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) else {
-                return;
-            };
-            let mut objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
-            tracker.update(&mut objects, &result, pair.step_s);
-            let Some(index) = objects.objects.iter().position(|o| o.moving) else {
-                return;
-            };
-            let taken_out: Vec<usize> = (0..objects.cell_object.len())
-                .filter(|&c| objects.cell_object[c] == index as u32 && result.moving[c])
-                .collect();
-            if taken_out.len() < 5 {
-                return;
+            if let Some(result) = compute_with_cache(&pair, &config, &mut cache) {
+                each(pair, result);
             }
-            for &cell in &taken_out {
-                result.moving[cell] = false;
-                result.fused[cell] = result.l_ray_ego[cell];
-            }
-            let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
-            assert!(counts.confirmed_moving >= taken_out.len(), "{counts:?}");
-            for &cell in &taken_out {
-                assert!(result.moving[cell], "cell {cell} not moving again");
-                // Its own measurement (then combined with its object's
-                // value), not the ego prediction it was given.
-                let (fused, lidar, ego) = (
-                    result.fused[cell],
-                    result.l_lidar[cell],
-                    result.l_ray_ego[cell],
-                );
-                assert!(
-                    (fused - lidar).abs() < 0.1 && (fused - lidar).abs() < (fused - ego).abs(),
-                    "fused {fused}, its L_lidar {lidar}, the ego prediction {ego}"
-                );
-            }
-            checked += 1;
         },
     )
     .unwrap();
-    assert!(checked >= 5, "{checked} pairs with a moving object");
 }

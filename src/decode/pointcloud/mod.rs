@@ -14,7 +14,7 @@ mod time;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 
 use super::DecodeLimits;
-use crate::model::{Scan, ScanLayout, StampNs};
+use crate::model::Scan;
 use crate::ros::DecodeError;
 use crate::ros::msgs::PointCloud2;
 use extract::extract;
@@ -34,24 +34,6 @@ pub(crate) fn normalize_frame_id(frame_id: &str) -> String {
     frame_id.strip_prefix('/').unwrap_or(frame_id).to_owned()
 }
 
-fn empty_scan(stamp_ns: StampNs, frame_id: String, sensor_pose: Isometry3<f64>) -> Scan {
-    Scan {
-        stamp_ns,
-        frame_id,
-        sensor_pose,
-        points_m: Vec::new(),
-        intensity: None,
-        ring: None,
-        time_offset_s: None,
-        source_index: Vec::new(),
-        input_point_count: 0,
-        skipped_invalid_points: 0,
-        organized: None,
-        layout: ScanLayout::default(),
-        sensor_ids: None,
-    }
-}
-
 /// Converts a `sensor_msgs/PointCloud2` into a [`Scan`] (identity sensor pose).
 ///
 /// `is_dense` is treated as a hint only: points are always checked, since
@@ -64,7 +46,7 @@ pub fn scan_from_pointcloud2(
     let frame_id = normalize_frame_id(&cloud.header.frame_id);
     let n = check_point_count(u64::from(cloud.width) * u64::from(cloud.height), limits)?;
     if n == 0 {
-        return Ok(empty_scan(stamp_ns, frame_id, Isometry3::identity()));
+        return Ok(Scan::empty(stamp_ns, frame_id, Isometry3::identity()));
     }
     let point_step = u64::from(cloud.point_step);
     if point_step == 0 {
@@ -176,7 +158,7 @@ pub fn scan_from_foxglove(
     let stride = cloud.point_stride as usize;
     if stride == 0 {
         if cloud.data.is_empty() {
-            return Ok(empty_scan(stamp_ns, frame_id, sensor_pose));
+            return Ok(Scan::empty(stamp_ns, frame_id, sensor_pose));
         }
         return Err(DecodeError::InvalidPointLayout(
             "point_stride is 0 but data is not empty".into(),
@@ -184,7 +166,7 @@ pub fn scan_from_foxglove(
     }
     let n = check_point_count((cloud.data.len() / stride) as u64, limits)?;
     if n == 0 {
-        return Ok(empty_scan(stamp_ns, frame_id, sensor_pose));
+        return Ok(Scan::empty(stamp_ns, frame_id, sensor_pose));
     }
     let layout = Layout {
         data: &cloud.data,

@@ -66,6 +66,25 @@ pub struct SensorIds {
 }
 
 impl Scan {
+    /// A scan without points (a cloud with none valid, or none at all).
+    pub fn empty(stamp_ns: StampNs, frame_id: String, sensor_pose: Isometry3<f64>) -> Self {
+        Self {
+            stamp_ns,
+            frame_id,
+            sensor_pose,
+            points_m: Vec::new(),
+            intensity: None,
+            ring: None,
+            time_offset_s: None,
+            source_index: Vec::new(),
+            input_point_count: 0,
+            skipped_invalid_points: 0,
+            organized: None,
+            layout: ScanLayout::default(),
+            sensor_ids: None,
+        }
+    }
+
     /// Number of valid points kept.
     pub fn len(&self) -> usize {
         self.points_m.len()

@@ -115,21 +115,11 @@ mod tests {
     use nalgebra::Vector3;
 
     fn scan(stamp_ns: i64) -> Arc<Scan> {
-        Arc::new(Scan {
+        Arc::new(Scan::empty(
             stamp_ns,
-            frame_id: "lidar".into(),
-            sensor_pose: nalgebra::Isometry3::identity(),
-            points_m: Vec::new(),
-            intensity: None,
-            ring: None,
-            time_offset_s: None,
-            source_index: Vec::new(),
-            input_point_count: 0,
-            skipped_invalid_points: 0,
-            organized: None,
-            layout: crate::model::ScanLayout::default(),
-            sensor_ids: None,
-        })
+            "lidar".into(),
+            nalgebra::Isometry3::identity(),
+        ))
     }
 
     /// The consecutive pairs of scans stamped `stamps_ns`, each with one
