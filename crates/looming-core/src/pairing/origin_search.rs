@@ -21,6 +21,15 @@ const MIN_RANGE_M: f64 = 2.0;
 const SAME_ORIGIN_M: f64 = 0.05;
 /// Rings spread more than this about the best origin: several origins, deg.
 pub(super) const MERGED_SPREAD_DEG: f64 = 0.3;
+/// Rings spread more than this about the origin a transform names: several
+/// origins, deg. Wider than about a searched origin, which is the one the
+/// rings are narrowest about: one sensor's lasers need not share its
+/// calibrated origin (KITTI's HDL-64E spreads 0.33 deg about `velo_link`,
+/// 0.11 about the origin searched; its lasers' vertical offsets reach 0.2
+/// m), while two or three LiDARs merged in `base_link` spread 1.6-3.0 deg
+/// about any one of theirs (`synth --lidars 2|3 --one-topic --frame
+/// vehicle`).
+pub(super) const MERGED_SPREAD_ABOUT_TRANSFORM_DEG: f64 = 0.8;
 
 /// Points with their ring: what the geometry is judged on.
 pub(super) struct RingedSample {
