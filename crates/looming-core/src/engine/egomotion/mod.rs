@@ -19,6 +19,8 @@
 
 use nalgebra::{Matrix6, Vector3, Vector6};
 
+mod linear;
+
 use super::config::EngineConfig;
 use super::grid::ImageGeometry;
 use super::surface::Surfaces;
@@ -407,6 +409,17 @@ pub(super) fn estimate_motion(
         }
         angular += taken.fixed_rows::<3>(0);
         velocity += taken.fixed_rows::<3>(3);
+        if linear::within_linear_reach(&taken, dt_s) {
+            // Small enough to take without rendering again: the render
+            // carried to it serves the pair's ego render.
+            current_render = Some(linear::corrected_render(
+                rendered,
+                current,
+                current_time,
+                &taken,
+            ));
+            break;
+        }
     }
     let Correction {
         inlier_cells,
