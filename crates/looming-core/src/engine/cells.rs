@@ -70,7 +70,8 @@ pub(super) fn per_cell(
         .par_iter()
         .map(|r| {
             let d = r.l_lidar - r.l_ray_ego;
-            let sigma_d = f64::from(r.sigma).hypot(f64::from(r.sigma_ego));
+            let (sigma, sigma_ego) = (f64::from(r.sigma), f64::from(r.sigma_ego));
+            let sigma_d = (sigma * sigma + sigma_ego * sigma_ego).sqrt();
             r.mask == 0
                 && d.is_finite()
                 && f64::from(d.abs())

@@ -208,7 +208,10 @@ pub fn angles(p: &[f32; 3]) -> (f64, f64) {
 /// compiler keeps), once per return per pair.
 pub fn elevation(p: &[f32; 3]) -> f64 {
     let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-    z.atan2(x.hypot(y))
+    // `sqrt` of the squares, not `hypot`: a LiDAR return's coordinates
+    // neither overflow nor underflow when squared, and libm's `hypot`,
+    // which guards against both, cost 3 % of a blind log's process.
+    z.atan2((x * x + y * y).sqrt())
 }
 
 /// Azimuth of a point (the first of [`angles`]).

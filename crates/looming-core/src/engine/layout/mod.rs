@@ -211,8 +211,7 @@ fn wrap_turn(d: f64) -> f64 {
 }
 
 fn elevation(p: &[f32; 3]) -> f64 {
-    let (x, y, z) = (f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-    z.atan2(x.hypot(y))
+    crate::engine::grid::elevation(p)
 }
 
 fn range(p: &[f32; 3]) -> f64 {

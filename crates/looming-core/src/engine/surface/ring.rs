@@ -20,7 +20,7 @@ pub(super) fn ground_height(scan: &Scan, image: &RangeImage) -> f64 {
         .iter()
         .filter(|&&i| i != NO_POINT)
         .map(|&i| scan.points_m[i as usize])
-        .filter(|p| p[2] < -(p[0].hypot(p[1])) * DOWN_TAN)
+        .filter(|p| p[2] < -(p[0] * p[0] + p[1] * p[1]).sqrt() * DOWN_TAN)
         .map(|p| p[2])
         .collect();
     if heights.len() < 20 {
