@@ -65,6 +65,8 @@ struct Totals {
     ground_signed: [Vec<f32>; 3],
     ground_rows: Vec<(f64, f64, usize)>,
     static_d: Vec<f32>,
+    /// The last pair's `|D|` on the cells of `static_d`.
+    pair_static_d: Vec<f32>,
     ms: f64,
     rows: usize,
 }
@@ -112,11 +114,12 @@ impl Totals {
             print_ego_estimate(e);
         }
         println!(
-            "pair {:3}: {:5.1} % trusted, ground {} cells median |fused| {:.4}, ground z {:.2}, {:.0} ms",
+            "pair {:3}: {:5.1} % trusted, ground {} cells median |fused| {:.4}, static |D| median {:.4}, ground z {:.2}, {:.0} ms",
             self.pairs - 1,
             100.0 * trusted as f64 / scan.points_m.len() as f64,
             pair_ground.len(),
             median(&mut pair_ground),
+            median(&mut std::mem::take(&mut self.pair_static_d)),
             ground_z,
             ms
         );
@@ -172,6 +175,7 @@ impl Totals {
             let d = r.disagreement[cell];
             if d.is_finite() {
                 self.static_d.push(d.abs());
+                self.pair_static_d.push(d.abs());
             }
         }
         pair_ground

@@ -93,6 +93,7 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
     let mut checked = 0;
     let (mut car_cells, mut trusted_before, mut trusted_after) = (0, 0, 0);
     for_each_cut_in_pair(|pair, mut result| {
+        // Untracked: every object as at its first sighting.
         let objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
         // The car: the nearest approaching object within 15 degrees of ahead.
         let Some((index, car)) = objects
@@ -111,9 +112,19 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
         let trusted =
             |r: &looming::engine::PairLooming| cells.iter().filter(|&&c| r.mask[c] == 0).count();
         let before = trusted(&result);
+        let engine_mask = result.mask.clone();
         let counts = fuse_objects(&mut result, &pair.current, &objects, &config.threat_ttc_s);
         let after = trusted(&result);
         assert!(after >= before, "{after} < {before}");
+        // Before a track tells whether its object moves across the rays, no
+        // cell the engine found at an occlusion edge is taken: there the
+        // outline of an object crossing the rays sweeps (on the synthetic
+        // crossing's right side sensor, a car's edge read 0.8 1/s against a
+        // truth of -1.5 when it was).
+        let edge_taken = (0..engine_mask.len())
+            .filter(|&c| engine_mask[c] & looming::engine::mask::EDGE != 0 && result.mask[c] == 0)
+            .count();
+        assert_eq!(edge_taken, 0, "edge cells trusted at a first sighting");
         assert!(counts.combined > 0, "{counts:?}");
         car_cells += cells.len();
         trusted_before += before;
@@ -131,11 +142,12 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
     });
     assert!(checked >= 5, "{checked} pairs with the car ahead");
     // Over the pairs: most of the car (its side, cutting in, is another face
-    // and keeps the engine's judgement: 77 % in all at 2026-11-25), a tenth
-    // more than the engine alone trusted (67 %).
+    // and keeps the engine's judgement: 70.6 % in all at 2026-11-26), a
+    // twentieth more than the engine alone trusted (66.8 %; 77 % and a tenth
+    // more while first sightings took edge cells too).
     assert!(
-        trusted_after as f64 >= 0.75 * car_cells as f64
-            && trusted_after as f64 >= 1.1 * trusted_before as f64,
+        trusted_after as f64 >= 0.7 * car_cells as f64
+            && trusted_after as f64 >= 1.05 * trusted_before as f64,
         "{trusted_before} -> {trusted_after} of {car_cells} car cells trusted"
     );
 }
