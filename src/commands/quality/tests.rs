@@ -206,3 +206,29 @@ fn a_sensor_stamped_off_the_others_or_without_a_transform_is_named() {
     assert_eq!(codes(&reports[2]), ["sensor_clock", "sensor_extrinsic"]);
     assert!(reports[2].diagnoses[0].message.contains("right"));
 }
+
+#[test]
+fn sensors_stamped_at_their_sweeps_start_at_different_rates_agree() {
+    // A 10 Hz roof and a 20 Hz side LiDAR, each stamped when its sweep
+    // starts and logged when it ends (`synth --lidars 3`): 100 and 50 ms
+    // from stamp to log time, one clock.
+    let sensor = |name: &str, period_ns: u64| {
+        let mut r = report(
+            (0..6)
+                .map(|i| {
+                    let mut p = pair(i, 0.004, -0.003, 90);
+                    p.current.stamp_ns = (1_000_000_000 + i * period_ns) as i64;
+                    p.current.log_time_ns = 1_000_000_000 + (i + 1) * period_ns;
+                    p
+                })
+                .collect(),
+        );
+        r.sensor = Some(name.into());
+        r
+    };
+    let mut reports = vec![sensor("roof", 100_000_000), sensor("left", 50_000_000)];
+    super::diagnose::diagnose_sensors(&mut reports, &[0, 0]);
+    for r in &reports {
+        assert!(codes(r).is_empty(), "{:?}", r.diagnoses);
+    }
+}
