@@ -178,27 +178,30 @@ fn layouts_are_read_from_the_pair_records_when_present() {
     );
 }
 
+/// Sensor `name`'s report of five pairs a `period_ns` apart, each logged
+/// `lag_ns` after its stamp.
+fn timed_sensor(name: &str, period_ns: u64, lag_ns: u64) -> QualityReport {
+    let mut r = report(
+        (0..5)
+            .map(|i| {
+                let mut p = pair(i, 0.004, -0.003, 90);
+                p.current.stamp_ns = (1_000_000_000 + i * period_ns) as i64;
+                p.current.log_time_ns = 1_000_000_000 + i * period_ns + lag_ns;
+                p
+            })
+            .collect(),
+    );
+    r.sensor = Some(name.into());
+    r
+}
+
 #[test]
 fn a_sensor_stamped_off_the_others_or_without_a_transform_is_named() {
     // Three sensors; the third's stamps are 200 ms behind its log times.
-    let sensor = |name: &str, stamp_lag_ns: u64| {
-        let mut r = report(
-            (0..5)
-                .map(|i| {
-                    let mut p = pair(i, 0.004, -0.003, 90);
-                    p.current.log_time_ns = 1_000_000_000 + i * 100_000_000 + stamp_lag_ns;
-                    p.current.stamp_ns = 1_000_000_000 + i as i64 * 100_000_000;
-                    p
-                })
-                .collect(),
-        );
-        r.sensor = Some(name.into());
-        r
-    };
     let mut reports = vec![
-        sensor("roof", 0),
-        sensor("left", 10_000_000),
-        sensor("right", 200_000_000),
+        timed_sensor("roof", 100_000_000, 0),
+        timed_sensor("left", 100_000_000, 10_000_000),
+        timed_sensor("right", 100_000_000, 200_000_000),
     ];
     super::diagnose::diagnose_sensors(&mut reports, &[0, 0, 3]);
     assert!(codes(&reports[0]).is_empty(), "{:?}", reports[0].diagnoses);
@@ -212,21 +215,10 @@ fn sensors_stamped_at_their_sweeps_start_at_different_rates_agree() {
     // A 10 Hz roof and a 20 Hz side LiDAR, each stamped when its sweep
     // starts and logged when it ends (`synth --lidars 3`): 100 and 50 ms
     // from stamp to log time, one clock.
-    let sensor = |name: &str, period_ns: u64| {
-        let mut r = report(
-            (0..6)
-                .map(|i| {
-                    let mut p = pair(i, 0.004, -0.003, 90);
-                    p.current.stamp_ns = (1_000_000_000 + i * period_ns) as i64;
-                    p.current.log_time_ns = 1_000_000_000 + (i + 1) * period_ns;
-                    p
-                })
-                .collect(),
-        );
-        r.sensor = Some(name.into());
-        r
-    };
-    let mut reports = vec![sensor("roof", 100_000_000), sensor("left", 50_000_000)];
+    let mut reports = vec![
+        timed_sensor("roof", 100_000_000, 100_000_000),
+        timed_sensor("left", 50_000_000, 50_000_000),
+    ];
     super::diagnose::diagnose_sensors(&mut reports, &[0, 0]);
     for r in &reports {
         assert!(codes(r).is_empty(), "{:?}", r.diagnoses);
