@@ -126,6 +126,8 @@ fn joined(a: &[f64; 3], b: &[f64; 3], min_sin_beta: f64, config: &ObjectConfig) 
     // sin(beta) of the triangle: the line a-b against the farther ray.
     let along = d1 - d2 * cos_alpha;
     let across = d2 * sin_alpha;
-    let hypot = along.hypot(across);
+    // `sqrt` of the squares, not libm's `hypot` (whose overflow guards a
+    // range in metres never needs): this runs for every pair of neighbours.
+    let hypot = (along * along + across * across).sqrt();
     hypot <= 1e-9 || across / hypot >= min_sin_beta
 }
