@@ -161,14 +161,12 @@ fn the_objects_looming_makes_the_cut_in_cars_cells_trusted() {
 /// rays, as its cells gave untouched.
 #[test]
 fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
-    use looming::objects::{ObjectConfig, ObjectTracker, PairObjects};
-    let object_config = ObjectConfig::default();
+    use looming::objects::ObjectTracker;
     let mut tracker = ObjectTracker::default();
     let mut checked = 0;
     for_each_cut_in_pair(|pair, result| {
-        let mut untouched = PairObjects::find(&pair.current, &result, &object_config);
         let before = tracker.clone();
-        tracker.update(&mut untouched, &result, pair.dt_s);
+        let untouched = tracked_objects(&pair, &result, &mut tracker);
         // A static object followed since the last pair, its looming
         // measured on its cells.
         let Some((index, object)) = untouched.objects.iter().enumerate().find(|(_, o)| {
@@ -188,9 +186,7 @@ fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
                 planted.disagreement[cell] = planted.l_lidar[cell] - planted.l_ray_ego[cell];
             }
         }
-        let mut objects = PairObjects::find(&pair.current, &planted, &object_config);
-        let mut tracker_planted = before;
-        tracker_planted.update(&mut objects, &planted, pair.dt_s);
+        let objects = tracked_objects(&pair, &planted, &mut before.clone());
         let same = objects
             .objects
             .iter()
@@ -222,13 +218,12 @@ fn cells_that_saw_another_surface_before_do_not_measure_a_followed_object() {
 #[test]
 fn a_moving_objects_disagreeing_cells_are_moving_though_outside_a_patch() {
     use looming::engine::EngineConfig;
-    use looming::objects::{ObjectConfig, ObjectTracker, PairObjects, fuse_objects};
+    use looming::objects::{ObjectTracker, fuse_objects};
     let config = EngineConfig::default();
     let mut tracker = ObjectTracker::default();
     let mut checked = 0;
     for_each_cut_in_pair(|pair, mut result| {
-        let mut objects = PairObjects::find(&pair.current, &result, &ObjectConfig::default());
-        tracker.update(&mut objects, &result, pair.step_s);
+        let objects = tracked_objects(&pair, &result, &mut tracker);
         let Some(index) = objects.objects.iter().position(|o| o.moving) else {
             return;
         };
@@ -261,6 +256,19 @@ fn a_moving_objects_disagreeing_cells_are_moving_though_outside_a_patch() {
         checked += 1;
     });
     assert!(checked >= 5, "{checked} pairs with a moving object");
+}
+
+/// The objects of `result` with their ids and velocities from `tracker`,
+/// as `process` finds and tracks them (before their feedback).
+fn tracked_objects(
+    pair: &looming::model::ScanPair,
+    result: &looming::engine::PairLooming,
+    tracker: &mut looming::objects::ObjectTracker,
+) -> looming::objects::PairObjects {
+    use looming::objects::{ObjectConfig, PairObjects};
+    let mut objects = PairObjects::find(&pair.current, result, &ObjectConfig::default());
+    tracker.update(&mut objects, result, pair.step_s);
+    objects
 }
 
 /// Every pair of the committed cut-in through the engine as `process` runs

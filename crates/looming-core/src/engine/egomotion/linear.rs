@@ -77,7 +77,7 @@ fn split(correction: &Vector6<f64>) -> (Vector3<f64>, Vector3<f64>) {
 }
 
 fn as_f64(v: [f32; 3]) -> Vector3<f64> {
-    Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
+    Vector3::from(v).cast()
 }
 
 #[cfg(test)]

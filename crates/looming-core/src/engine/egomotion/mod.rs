@@ -17,9 +17,9 @@
 //! -dt ((X x n) . w + n . v)`, in metres along the normal; six unknowns,
 //! solved by iteratively reweighted least squares.
 
-use nalgebra::{Matrix6, Vector3, Vector6};
-
 mod linear;
+
+use nalgebra::{Matrix6, Vector3, Vector6};
 
 use super::config::EngineConfig;
 use super::grid::ImageGeometry;
