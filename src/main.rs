@@ -9,6 +9,7 @@ use clap::Parser;
 
 fn main() -> ExitCode {
     restore_sigpipe();
+    keep_freed_memory();
     let args = cli::Cli::parse();
     cli::stop_on_ctrl_c();
     match cli::run(args) {
@@ -19,6 +20,23 @@ fn main() -> ExitCode {
             eprintln!("error: {}{hint}", failure.error);
             ExitCode::from(failure.code as u8)
         }
+    }
+}
+
+/// Each scan pair allocates and frees images of a few megabytes. glibc's
+/// malloc serves blocks that large with `mmap` and returns them on free, so
+/// every pair faulted and zeroed its pages afresh: half a million page
+/// faults and 5 % of the CPU on a 100-scan 64 x 2048 log. Blocks up to the
+/// largest threshold glibc allows (32 MiB on 64-bit) now come from the heap,
+/// and freed memory stays with the process for the next pair (the peak
+/// resident size is what it was: the pairs' buffers are alike).
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: called in main before any thread exists; mallopt only tunes
+    // the allocator's thresholds (a rejected value leaves them unchanged).
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 512 << 20);
     }
 }
 

@@ -176,27 +176,90 @@ fn smoothed_static(
         .into_par_iter()
         .map(|n| raw[n].mask == 0 && !moving[n] && !candidate[n] && pointwise[n].is_finite())
         .collect();
-    let trusted_static = |n: usize| trusted_static[n];
-    (0..geometry.cells())
-        .into_par_iter()
-        .map(|cell| {
-            if !trusted_static(cell) {
-                return pointwise[cell];
+    let mut smoothed = vec![0.0f32; geometry.cells()];
+    // Row by row with the neighbours' rows and columns worked out once per
+    // row and column, not by a division per neighbour: this reads nine
+    // cells for every cell of the image.
+    smoothed
+        .par_chunks_mut(geometry.cols)
+        .enumerate()
+        .for_each(|(row, smoothed_row)| {
+            let window = NeighbourRows::of(geometry, row);
+            for (col, smoothed) in smoothed_row.iter_mut().enumerate() {
+                let cell = row * geometry.cols + col;
+                *smoothed = if trusted_static[cell] {
+                    static_median(&window, (cell, col), current, &trusted_static, pointwise)
+                } else {
+                    pointwise[cell]
+                };
             }
-            // Only neighbours on the same surface (parallel planes): the base
-            // of an object is not smoothed into the road it stands on.
-            let normal = current.normal[cell];
-            let same_surface = |n: usize| {
-                let m = current.normal[n];
-                normal[0] * m[0] + normal[1] * m[1] + normal[2] * m[2] > 0.95
-            };
-            let values = std::iter::once(cell)
-                .chain(geometry.neighbours_3x3(cell).filter(|&n| same_surface(n)))
-                .filter(|&n| trusted_static(n))
-                .map(|n| pointwise[n]);
-            median_3x3(values).unwrap_or(pointwise[cell])
-        })
-        .collect()
+        });
+    smoothed
+}
+
+/// The rows of a cell's 3x3 window (those inside the image), as the first
+/// cell of each with its row offset, for [`smoothed_static`].
+struct NeighbourRows {
+    /// (row offset -1, 0 or 1, first cell of the row).
+    starts: [(i8, usize); 3],
+    count: usize,
+    cols: usize,
+}
+
+impl NeighbourRows {
+    fn of(geometry: &ImageGeometry, row: usize) -> Self {
+        let mut starts = [(0, 0); 3];
+        let mut count = 0;
+        for (offset, r) in [(-1, row.wrapping_sub(1)), (0, row), (1, row + 1)] {
+            if r < geometry.rows {
+                starts[count] = (offset, r * geometry.cols);
+                count += 1;
+            }
+        }
+        Self {
+            starts,
+            count,
+            cols: geometry.cols,
+        }
+    }
+}
+
+/// The median of a trusted static cell's value with those of its trusted
+/// static 3x3 neighbours on the same surface (parallel planes: the base of
+/// an object is not smoothed into the road it stands on). Columns wrap
+/// around the sweep, as in `ImageGeometry::neighbours_3x3`.
+fn static_median(
+    window: &NeighbourRows,
+    (cell, col): (usize, usize),
+    current: &Surfaces,
+    trusted_static: &[bool],
+    pointwise: &[f32],
+) -> f32 {
+    let cols = window.cols;
+    let normal = current.normal[cell];
+    let around = [
+        if col == 0 { cols - 1 } else { col - 1 },
+        col,
+        if col + 1 == cols { 0 } else { col + 1 },
+    ];
+    let mut values = [0.0f32; 9];
+    values[0] = pointwise[cell];
+    let mut count = 1;
+    for &(row_offset, start) in &window.starts[..window.count] {
+        for (col_offset, &c) in around.iter().enumerate() {
+            if row_offset == 0 && col_offset == 1 {
+                continue;
+            }
+            let n = start + c;
+            let m = current.normal[n];
+            let same_surface = normal[0] * m[0] + normal[1] * m[1] + normal[2] * m[2] > 0.95;
+            if same_surface && trusted_static[n] {
+                values[count] = pointwise[n];
+                count += 1;
+            }
+        }
+    }
+    median_of(&values[..count])
 }
 
 /// The threat level of every trusted cell's fused looming (none elsewhere).
@@ -402,15 +465,20 @@ fn median_3x3(values: impl Iterator<Item = f32>) -> Option<f32> {
         window[count] = value;
         count += 1;
     }
-    if count == 0 {
-        return None;
-    }
-    // The middle order statistic of `f32::total_cmp`'s order, by insertion
-    // sort of the values' total-order keys: for nine values a few dozen
-    // integer comparisons, where the general selection's setup costs more
-    // than the sort.
-    let mut keys = window.map(total_order_key);
+    (count > 0).then(|| median_of(&window[..count]))
+}
+
+/// The middle (upper middle) value of a non-empty slice of at most a few
+/// values in `f32::total_cmp`'s order, by insertion sort of the values'
+/// total-order keys: for nine values a few dozen integer comparisons, where
+/// the general selection's setup costs more than the sort.
+fn median_of(values: &[f32]) -> f32 {
+    let count = values.len();
+    let mut keys = [0i32; 9];
     let keys = &mut keys[..count];
+    for (key, &value) in keys.iter_mut().zip(values.iter()) {
+        *key = total_order_key(value);
+    }
     for i in 1..count {
         let key = keys[i];
         let mut j = i;
@@ -420,7 +488,7 @@ fn median_3x3(values: impl Iterator<Item = f32>) -> Option<f32> {
         }
         keys[j] = key;
     }
-    Some(from_total_order_key(keys[count / 2]))
+    from_total_order_key(keys[count / 2])
 }
 
 /// An `f32`'s bits as an integer that orders as `f32::total_cmp` does

@@ -40,13 +40,7 @@ impl GroundFit {
     pub fn find(looming: &PairLooming, scan: &Scan) -> Option<Self> {
         let candidates = ground_candidates(looming, scan);
         let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
-        heights.sort_unstable_by(f64::total_cmp);
-        let height = *heights.get(heights.len() / 2)?;
-        let height = if heights.len().is_multiple_of(2) {
-            0.5 * (height + heights[heights.len() / 2 - 1])
-        } else {
-            height
-        };
+        let height = median(&mut heights)?;
         let near_height: Vec<(usize, [f64; 3])> = candidates
             .iter()
             .filter(|(_, p)| {
@@ -84,8 +78,28 @@ impl GroundFit {
     }
 }
 
+/// The median of `values` (the mean of the middle two for an even count),
+/// by selection, not a sort: tens of thousands of ground cells per scan.
+/// Reorders `values`.
+fn median(values: &mut [f64]) -> Option<f64> {
+    let (mid, even) = (values.len() / 2, values.len().is_multiple_of(2));
+    if values.is_empty() {
+        return None;
+    }
+    let (below, &mut upper, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
+    if !even {
+        return Some(upper);
+    }
+    // The lower middle is the largest of those before the middle.
+    let lower = below.iter().copied().max_by(f64::total_cmp)?;
+    Some(0.5 * (upper + lower))
+}
+
+/// Distance from the sensor's z axis, metres (`sqrt` of the squares, not
+/// libm's `hypot`, whose overflow guards metres never need: this runs for
+/// every ground candidate twice).
 fn horizontal(p: &[f64; 3]) -> f64 {
-    p[0].hypot(p[1])
+    (p[0] * p[0] + p[1] * p[1]).sqrt()
 }
 
 fn height_above([a, b, c]: [f64; 3], p: &[f64; 3]) -> f64 {
@@ -130,4 +144,31 @@ fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
         .iter()
         .all(|x| x.is_finite())
         .then(|| [solution[0], solution[1], solution[2]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The selection gives the sorted list's median, for odd and even counts.
+    #[test]
+    fn median_by_selection_is_the_sorted_median() {
+        let mut state = 7u32;
+        for count in 0..40 {
+            let values: Vec<f64> = (0..count)
+                .map(|_| {
+                    state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    f64::from(state >> 20) / 100.0 - 20.0
+                })
+                .collect();
+            let mut sorted = values.clone();
+            sorted.sort_unstable_by(f64::total_cmp);
+            let expected = match count {
+                0 => None,
+                n if n % 2 == 1 => Some(sorted[n / 2]),
+                n => Some(0.5 * (sorted[n / 2] + sorted[n / 2 - 1])),
+            };
+            assert_eq!(median(&mut values.clone()), expected, "{values:?}");
+        }
+    }
 }
