@@ -241,11 +241,13 @@ fn geometry_of(returns: &[[f64; 3]]) -> (f64, [f64; 3], [f64; 3], [f64; 3]) {
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
         .collect();
-    ranges.sort_unstable_by(f64::total_cmp);
-    let nearest_range_m = ranges
-        .get((ranges.len().saturating_sub(1)) / 10)
-        .copied()
-        .unwrap_or(f64::NAN);
+    // The 10th percentile by selection: objects of thousands of cells.
+    let tenth = ranges.len().saturating_sub(1) / 10;
+    let nearest_range_m = if ranges.is_empty() {
+        f64::NAN
+    } else {
+        *ranges.select_nth_unstable_by(tenth, f64::total_cmp).1
+    };
     let n = returns.len().max(1) as f64;
     let mut centroid_m = [0.0; 3];
     let mut min_m = [f64::INFINITY; 3];
@@ -373,24 +375,91 @@ fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, 
     Some((centre, se))
 }
 
-/// The value at which half the weight lies on either side.
+/// The value at which half the weight lies on either side: the first value,
+/// in ascending order, at which the running sum of the weights reaches half
+/// their total. By selection (quickselect on the values, keeping the weight
+/// of all that lie below the part still searched), not a sort: an object's
+/// cells run to thousands and this runs several times per object. Reorders
+/// `values`.
 fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
-    // Unstable: equal values' weights add up the same in any order.
-    values.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let half = values.iter().map(|v| v.1).sum::<f64>() / 2.0;
-    let mut seen = 0.0;
-    for &(value, weight) in values.iter() {
+    let by_value = |a: &(f64, f64), b: &(f64, f64)| a.0.total_cmp(&b.0);
+    // `values[lo..hi]` holds the answer; `below` weighs `values[..lo]`, all
+    // of which precede it in ascending order.
+    let (mut lo, mut hi, mut below) = (0, values.len(), 0.0);
+    while hi - lo > SORTED_TAIL {
+        let mid = lo + (hi - lo) / 2;
+        let (left, pivot, _) = values[lo..hi].select_nth_unstable_by(mid - lo, by_value);
+        let left_weight = left.iter().map(|v| v.1).sum::<f64>();
+        if below + left_weight >= half {
+            hi = mid;
+        } else if below + left_weight + pivot.1 >= half {
+            return pivot.0;
+        } else {
+            below += left_weight + pivot.1;
+            lo = mid + 1;
+        }
+    }
+    let tail = &mut values[lo..hi];
+    tail.sort_unstable_by(by_value);
+    let mut seen = below;
+    for &(value, weight) in tail.iter() {
         seen += weight;
         if seen >= half {
             return value;
         }
     }
-    values.last().map_or(f64::NAN, |v| v.0)
+    // Not reached (weights not finite): the largest value, as a full scan.
+    values
+        .iter()
+        .map(|v| v.0)
+        .max_by(f64::total_cmp)
+        .unwrap_or(f64::NAN)
 }
+
+/// Below this many values [`weighted_median`] sorts what is left.
+const SORTED_TAIL: usize = 16;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The selection gives what the running sum over the sorted values
+    /// gives, ties and equal weights included.
+    #[test]
+    fn weighted_median_by_selection_is_the_sorted_scans() {
+        let sorted_scan = |values: &[(f64, f64)]| {
+            let mut sorted = values.to_vec();
+            sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let half = values.iter().map(|v| v.1).sum::<f64>() / 2.0;
+            let mut seen = 0.0;
+            for &(value, weight) in &sorted {
+                seen += weight;
+                if seen >= half {
+                    return value;
+                }
+            }
+            sorted.last().map_or(f64::NAN, |v| v.0)
+        };
+        let mut state = 99u32;
+        let mut next = |modulo: u32| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) % modulo
+        };
+        for case in 0..3000 {
+            let count = 1 + case % 200;
+            let values: Vec<(f64, f64)> = (0..count)
+                .map(|_| {
+                    // Few distinct values (ties) and weights: 1, 4 or 1e6.
+                    let value = f64::from(next(40)) * 0.25 - 5.0;
+                    let weight = [1.0, 4.0, 1e6][next(3) as usize];
+                    (value, weight)
+                })
+                .collect();
+            let expected = sorted_scan(&values);
+            assert_eq!(weighted_median(&mut values.clone()), expected, "{values:?}");
+        }
+    }
 
     #[test]
     fn an_object_assumed_static_looms_by_the_ego_velocity_along_its_nearest_rays() {
