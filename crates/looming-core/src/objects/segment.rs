@@ -112,17 +112,25 @@ fn neighbours(
     .filter(move |&(n, _)| n != cell)
 }
 
-/// Whether two neighbouring returns are on one object.
+/// Whether two neighbouring returns are on one object: the angle criterion,
+/// and a gap of at most `max_gap_m` or, between rays far apart, what a
+/// surface facing the sensor leaves between them ([`RAY_GAP_FACTOR`] times
+/// the nearer range times the sine of the rays' angle). A sparse sensor's
+/// rings lie 11 degrees apart (OS0-8): a wall 8 m away shows 1.6 m between
+/// them, and a fixed gap cut it into one stripe per ring, each an object
+/// of its own that a newly uncovered stretch of wall left without any
+/// measured cell. A dense sensor's neighbours lie a fraction of a degree
+/// apart, where the fixed gap rules to 80 m.
 fn joined(a: &[f64; 3], b: &[f64; 3], min_sin_beta: f64, config: &ObjectConfig) -> bool {
     let gap = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
-    if gap > config.max_gap_m {
-        return false;
-    }
     let ra = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
     let rb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
     let (d1, d2) = if ra >= rb { (ra, rb) } else { (rb, ra) };
     let cos_alpha = ((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (ra * rb)).clamp(-1.0, 1.0);
     let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
+    if gap > config.max_gap_m.max(RAY_GAP_FACTOR * d2 * sin_alpha) {
+        return false;
+    }
     // sin(beta) of the triangle: the line a-b against the farther ray.
     let along = d1 - d2 * cos_alpha;
     let across = d2 * sin_alpha;
@@ -130,4 +138,38 @@ fn joined(a: &[f64; 3], b: &[f64; 3], min_sin_beta: f64, config: &ObjectConfig) 
     // range in metres never needs): this runs for every pair of neighbours.
     let hypot = (along * along + across * across).sqrt();
     hypot <= 1e-9 || across / hypot >= min_sin_beta
+}
+
+/// A surface facing the sensor leaves `range x sin(alpha)` between rays
+/// `alpha` apart; one at 60 degrees from facing twice that.
+const RAY_GAP_FACTOR: f64 = 2.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A point at `range_m` along azimuth 0 and elevation `elevation_deg`.
+    fn ray_point(range_m: f64, elevation_deg: f64) -> [f64; 3] {
+        let e = elevation_deg.to_radians();
+        [range_m * e.cos(), 0.0, range_m * e.sin()]
+    }
+
+    #[test]
+    fn a_sparse_sensors_rings_on_one_wall_are_one_object() {
+        let config = ObjectConfig::default();
+        let min_sin_beta = config.join_angle_deg.to_radians().sin();
+        // An OS0-8's neighbouring rings, 11.4 degrees apart, on a wall 8 m
+        // ahead: 1.6 m apart, beyond the fixed gap, and one surface.
+        let (lower, upper) = (
+            ray_point(8.0, 0.0),
+            ray_point(8.0 / 11.4f64.to_radians().cos(), 11.4),
+        );
+        assert!(joined(&lower, &upper, min_sin_beta, &config));
+        // A box 3.3 m away before that wall, on the next ring: a step.
+        assert!(!joined(&ray_point(3.3, 0.0), &upper, min_sin_beta, &config));
+        // A dense sensor's rows, 0.4 degrees apart, 2 m apart in range far
+        // away: the fixed gap still parts them.
+        let (near, far) = (ray_point(60.0, 0.0), ray_point(62.0, 0.4));
+        assert!(!joined(&near, &far, min_sin_beta, &config));
+    }
 }
