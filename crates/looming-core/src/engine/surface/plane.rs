@@ -146,7 +146,11 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
             }
             let step = value / slope;
             smallest -= step;
-            if step.abs() <= 1e-14 * trace {
+            // Converged: the error left after a step is about its square
+            // over the middle eigenvalue (at least 1e-3 of the trace for a
+            // plane), so a step of 1e-10 of the trace leaves under 1e-16 of
+            // it, and the step that would show as much is not taken.
+            if step.abs() <= NEWTON_CONVERGED * trace {
                 break;
             }
         }
@@ -163,6 +167,9 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
 /// Newton steps at most for the smallest eigenvalue (a plane needs 2-3; two
 /// equal small eigenvalues, a line, converge linearly).
 const NEWTON_STEPS: usize = 30;
+
+/// A Newton step below this fraction of the trace ends the iteration.
+const NEWTON_CONVERGED: f64 = 1e-10;
 
 /// A unit vector in the null space of a (nearly) singular symmetric matrix: the
 /// largest cross product of two of its rows.
