@@ -143,50 +143,79 @@ impl Surfaces {
             },
             ..params
         };
-        let fitted: Vec<CellSurface> = (0..geometry.cells())
-            .into_par_iter()
-            // One scratch buffer per worker: no allocation per cell.
-            .map_init(Scratch::default, |scratch, cell| {
-                let params = SurfaceParams {
-                    range_noise_m: f64::from(noise_m_per_row[cell / geometry.cols]),
-                    ..params
-                };
-                fit_cell(&returns, geometry, cell, params, scratch)
-            })
-            .collect();
-        let mut surfaces = Self {
-            range_m: fitted.iter().map(|c| c.range_m).collect(),
-            direction: fitted.iter().map(|c| c.direction).collect(),
-            normal: fitted.iter().map(|c| c.normal).collect(),
-            incidence_cos: fitted.iter().map(|c| c.incidence_cos).collect(),
-            support: fitted.iter().map(|c| c.support).collect(),
-            edge: fitted.iter().map(|c| c.edge).collect(),
-            noise_m_per_row,
-            range_bias_m_per_row,
-            joins: Vec::new(),
-            azimuth_rad: Vec::new(),
-            elevation_rad: Vec::new(),
-            cols: geometry.cols,
-        };
+        let mut surfaces = Self::empty(geometry.cells(), geometry.cols);
+        surfaces.write_fits(&returns, geometry, params, &noise_m_per_row);
+        surfaces.noise_m_per_row = noise_m_per_row;
+        surfaces.range_bias_m_per_row = range_bias_m_per_row;
         surfaces.joins = super::warp::mesh_joins(&surfaces, geometry.rows, geometry.cols);
-        (surfaces.azimuth_rad, surfaces.elevation_rad) = direction_angles(&surfaces);
         surfaces
     }
-}
 
-/// Azimuth and elevation of each cell's `direction` (NaN where empty).
-fn direction_angles(surfaces: &Surfaces) -> (Vec<f64>, Vec<f64>) {
-    surfaces
-        .direction
-        .par_iter()
-        .zip(&surfaces.range_m)
-        .map(|(d, range)| {
-            if !range.is_finite() {
-                return (f64::NAN, f64::NAN);
-            }
-            super::grid::angles(d)
-        })
-        .unzip()
+    /// `cells` cells, every per-cell field to be written (`write_fits`).
+    fn empty(cells: usize, cols: usize) -> Self {
+        Self {
+            range_m: vec![f32::NAN; cells],
+            direction: vec![[0.0; 3]; cells],
+            normal: vec![[0.0; 3]; cells],
+            incidence_cos: vec![1.0; cells],
+            support: vec![0; cells],
+            edge: vec![false; cells],
+            noise_m_per_row: Vec::new(),
+            range_bias_m_per_row: Vec::new(),
+            joins: Vec::new(),
+            azimuth_rad: vec![f64::NAN; cells],
+            elevation_rad: vec![f64::NAN; cells],
+            cols,
+        }
+    }
+
+    /// Every cell's fit (`fit_cell`), row by row on rayon's workers, written
+    /// straight into the per-cell fields (no array of [`CellSurface`] to
+    /// split field by field), with the azimuth and elevation of its
+    /// `direction` (NaN where empty).
+    fn write_fits(
+        &mut self,
+        returns: &Returns,
+        geometry: &ImageGeometry,
+        params: SurfaceParams,
+        noise_m_per_row: &[f32],
+    ) {
+        let cols = geometry.cols.max(1);
+        let rows = (
+            self.range_m.par_chunks_mut(cols),
+            self.direction.par_chunks_mut(cols),
+            self.normal.par_chunks_mut(cols),
+            self.incidence_cos.par_chunks_mut(cols),
+            self.support.par_chunks_mut(cols),
+            self.edge.par_chunks_mut(cols),
+            self.azimuth_rad.par_chunks_mut(cols),
+            self.elevation_rad.par_chunks_mut(cols),
+        );
+        rows.into_par_iter().enumerate().for_each_init(
+            // One scratch buffer per worker: no allocation per cell.
+            Scratch::default,
+            |scratch, (row, out)| {
+                let (range_m, direction, normal, incidence_cos, support, edge, azimuth, elevation) =
+                    out;
+                let params = SurfaceParams {
+                    range_noise_m: f64::from(noise_m_per_row[row]),
+                    ..params
+                };
+                for col in 0..range_m.len() {
+                    let fit = fit_cell(returns, geometry, row * cols + col, params, scratch);
+                    range_m[col] = fit.range_m;
+                    direction[col] = fit.direction;
+                    normal[col] = fit.normal;
+                    incidence_cos[col] = fit.incidence_cos;
+                    support[col] = fit.support;
+                    edge[col] = fit.edge;
+                    if fit.range_m.is_finite() {
+                        (azimuth[col], elevation[col]) = super::grid::angles(&fit.direction);
+                    }
+                }
+            },
+        );
+    }
 }
 
 #[derive(Debug, Clone, Copy)]

@@ -138,17 +138,11 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
     }
     let mut smallest = 0.0f64;
     if minors > 0.0 && det > 0.0 {
-        for _ in 0..NEWTON_STEPS {
-            let value = ((smallest - trace) * smallest + minors) * smallest - det;
-            let slope = (3.0 * smallest - 2.0 * trace) * smallest + minors;
-            if slope <= 0.0 {
-                break;
-            }
-            let step = value / slope;
-            smallest -= step;
-            if step.abs() <= 1e-14 * trace {
-                break;
-            }
+        // The first step from 0 by hand (the polynomial is -det there, its
+        // slope `minors`): the same bits, without its products.
+        smallest = det / minors;
+        if smallest > NEWTON_CONVERGED * trace {
+            smallest = newton_from(smallest, trace, minors, det);
         }
     }
     // The other two: sum `trace - smallest`, product `minors - smallest * sum`.
@@ -160,9 +154,36 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
     Some((smallest, middle.max(smallest), largest))
 }
 
+/// Newton's iteration for the smallest root of the characteristic
+/// polynomial `-x^3 + trace x^2 - minors x + det` (sign flipped), from
+/// `start`, below it.
+fn newton_from(start: f64, trace: f64, minors: f64, det: f64) -> f64 {
+    let mut smallest = start;
+    for _ in 1..NEWTON_STEPS {
+        let value = ((smallest - trace) * smallest + minors) * smallest - det;
+        let slope = (3.0 * smallest - 2.0 * trace) * smallest + minors;
+        if slope <= 0.0 {
+            break;
+        }
+        let step = value / slope;
+        smallest -= step;
+        // Converged: the error left after a step is about its square
+        // over the middle eigenvalue (at least 1e-3 of the trace for a
+        // plane), so a step of 1e-10 of the trace leaves under 1e-16 of
+        // it, and the step that would show as much is not taken.
+        if step.abs() <= NEWTON_CONVERGED * trace {
+            break;
+        }
+    }
+    smallest
+}
+
 /// Newton steps at most for the smallest eigenvalue (a plane needs 2-3; two
 /// equal small eigenvalues, a line, converge linearly).
 const NEWTON_STEPS: usize = 30;
+
+/// A Newton step below this fraction of the trace ends the iteration.
+const NEWTON_CONVERGED: f64 = 1e-10;
 
 /// A unit vector in the null space of a (nearly) singular symmetric matrix: the
 /// largest cross product of two of its rows.

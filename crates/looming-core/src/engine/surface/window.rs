@@ -3,7 +3,7 @@
 //! return passes the range gate and lies on the plane
 //! ([`fit_whole_window`]), else return by return ([`fit_gated_points`]).
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use super::plane::{
     Plane, eigenvalues_below, fit_plane_spread, plane_of_scatter, principal_minors,
@@ -137,10 +137,7 @@ pub(super) fn fit_whole_window(
 ) -> Option<(CellSurface, Option<f64>)> {
     let range = center.norm();
     let moments = window.total;
-    if moments.count < 4.0 {
-        return None;
-    }
-    let (centroid, covariance) = moments.scatter()?;
+    let (centroid, covariance) = window.scatter?;
     let plane = plane_of_scatter(moments.count, centroid, &covariance)?;
     let tolerance = plane_tolerance_m(params, range);
     if !window_on_plane(returns, cols, window, &plane, tolerance) {
@@ -163,6 +160,10 @@ pub(super) fn fit_whole_window(
 pub(super) struct GatedWindow {
     /// Moments of all the window's returns.
     total: Moments,
+    /// Their centroid and scatter ([`Moments::scatter`]) where they are at
+    /// least four (a plane's worth): computed once for both [`too_narrow`]
+    /// and [`fit_whole_window`].
+    scatter: Option<(Vector3<f64>, Matrix3<f64>)>,
     first_row: usize,
     last_row: usize,
     col: usize,
@@ -200,11 +201,13 @@ pub(super) fn gated_window(
     if !gated {
         return None;
     }
+    let total = returns
+        .sums
+        .window_over_rows(first_row..=last_row, col, half_cols)?;
     Some(GatedWindow {
         range_m,
-        total: returns
-            .sums
-            .window_over_rows(first_row..=last_row, col, half_cols)?,
+        total,
+        scatter: total.scatter().filter(|_| total.count >= 4.0),
         first_row,
         last_row,
         col,
@@ -224,7 +227,7 @@ pub(super) fn gated_window(
 #[inline]
 pub(super) fn too_narrow(gated: &GatedWindow, params: SurfaceParams) -> bool {
     let count = gated.total.count;
-    let Some((_, scatter)) = gated.total.scatter().filter(|_| count >= 4.0) else {
+    let Some((_, scatter)) = gated.scatter else {
         return false;
     };
     let narrow_m2 = count * (2.0 * params.range_noise_m).powi(2);
