@@ -112,25 +112,35 @@ pub(in crate::engine) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usiz
         });
     // Each quad's two triangles, from its edges' bits (some in the next row
     // and column): a render reads one byte per quad instead of five.
-    let quads: Vec<u8> = (0..joins.len())
-        .into_par_iter()
-        .map(|cell| quad_bits(surfaces, &joins, cell, rows, cols))
-        .collect();
+    let mut quads = vec![0; rows * cols];
+    quads
+        .par_chunks_mut(cols.max(1))
+        .enumerate()
+        .for_each(|(row, quads_of_row)| {
+            for (col, quad) in quads_of_row.iter_mut().enumerate() {
+                *quad = quad_bits(surfaces, &joins, (row, col), (rows, cols));
+            }
+        });
     for (joins, quad) in joins.iter_mut().zip(quads) {
         *joins |= quad;
     }
     joins
 }
 
-/// The quad at `cell` (cells a = `cell`, b right of it, c below it, d below
+/// The quad at (`row`, `col`) (cells a there, b right of it, c below it, d below
 /// b): [`QUAD_FIRST`] where its triangle (a, b, c) has all three edges on
 /// one surface, [`QUAD_SECOND`] the same for (b, d, c), [`EDGE_FIRST`] and
 /// [`EDGE_SECOND`] where a vertex of either lies on an occlusion edge.
-fn quad_bits(surfaces: &Surfaces, joins: &[u8], a: usize, rows: usize, cols: usize) -> u8 {
-    let (row, col) = (a / cols, a % cols);
+fn quad_bits(
+    surfaces: &Surfaces,
+    joins: &[u8],
+    (row, col): (usize, usize),
+    (rows, cols): (usize, usize),
+) -> u8 {
     if row + 1 >= rows {
         return 0;
     }
+    let a = row * cols + col;
     let b = row * cols + if col + 1 == cols { 0 } else { col + 1 };
     let (c, d) = (a + cols, b + cols);
     let all = |bits: [bool; 3]| bits.iter().all(|&bit| bit);
