@@ -5,7 +5,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::{Source, Vertex};
+use super::{Source, Vertex, Vertices};
 use crate::engine::grid::ImageGeometry;
 use crate::engine::surface::Surfaces;
 
@@ -14,39 +14,59 @@ use crate::engine::surface::Surfaces;
 /// returns) so the mesh keeps its triangles around them: the missing vertex
 /// is the midpoint of its row neighbours when they lie on one surface.
 /// Returns, per cell, the source cell whose surface the vertex stands for
-/// (itself, or the left neighbour of a bridged dropout).
+/// (itself, or the left neighbour of a bridged dropout), and per row
+/// whether it bridged any.
 pub(super) fn fill_dropouts(
     source: &Source,
     geometry: &ImageGeometry,
-    vertices: &mut [Option<Vertex>],
-) -> Vec<u32> {
-    let cols = geometry.cols;
+    vertices: &mut Vertices,
+) -> Proxies {
+    let (rows, cols) = (geometry.rows, geometry.cols);
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
-    for row in 0..geometry.rows {
+    let mut bridged_row = vec![false; rows];
+    let sparse = !vertices.normal.is_empty();
+    for (row, bridged) in bridged_row.iter_mut().enumerate() {
         for col in 0..cols {
             let cell = row * cols + col;
-            if vertices[cell].is_some() || source.surfaces.range_m[cell].is_finite() {
+            let at = col * rows + row;
+            if vertices.at[at].is_some() || source.surfaces.range_m[cell].is_finite() {
                 continue;
             }
-            let left = row * cols + (col + cols - 1) % cols;
-            let right = row * cols + (col + 1) % cols;
-            let (Some(a), Some(b)) = (vertices[left], vertices[right]) else {
+            let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+            let (left, right) = (row * cols + left_col, row * cols + right_col);
+            let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
+            let (Some(a), Some(b)) = (vertices.at[left_at], vertices.at[right_at]) else {
                 continue;
             };
             if !same_surface(source.surfaces, left, right) || (a.col - b.col).abs() > 3.0 {
                 continue;
             }
-            vertices[cell] = Some(Vertex {
+            vertices.at[at] = Some(Vertex {
                 position: Point3::from((a.position.coords + b.position.coords) * 0.5),
-                normal: (a.normal + b.normal) * 0.5,
                 row: 0.5 * (a.row + b.row),
                 col: 0.5 * (a.col + b.col),
                 time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
             });
+            if sparse {
+                vertices.normal[at] = (vertices.normal[left_at] + vertices.normal[right_at]) * 0.5;
+            }
             proxy[cell] = left as u32;
+            *bridged = true;
         }
     }
-    proxy
+    Proxies {
+        cell: proxy,
+        bridged_row,
+    }
+}
+
+/// What each vertex stands for, from [`fill_dropouts`].
+pub(super) struct Proxies {
+    /// Per cell, the source cell whose surface its vertex stands for.
+    pub cell: Vec<u32>,
+    /// Per row, whether any of its vertices stands for another cell: where
+    /// none of a quad's does, the scan's own table (`mesh_joins`) holds.
+    pub bridged_row: Vec<bool>,
 }
 
 /// Which neighbours each cell shares a surface with (`same_surface`), for
@@ -90,12 +110,67 @@ pub(in crate::engine) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usiz
                 }
             }
         });
+    // Each quad's two triangles, from its edges' bits (some in the next row
+    // and column): a render reads one byte per quad instead of five.
+    let mut quads = vec![0; rows * cols];
+    quads
+        .par_chunks_mut(cols.max(1))
+        .enumerate()
+        .for_each(|(row, quads_of_row)| {
+            for (col, quad) in quads_of_row.iter_mut().enumerate() {
+                *quad = quad_bits(surfaces, &joins, (row, col), (rows, cols));
+            }
+        });
+    for (joins, quad) in joins.iter_mut().zip(quads) {
+        *joins |= quad;
+    }
     joins
+}
+
+/// The quad at (`row`, `col`) (cells a there, b right of it, c below it, d below
+/// b): [`QUAD_FIRST`] where its triangle (a, b, c) has all three edges on
+/// one surface, [`QUAD_SECOND`] the same for (b, d, c), [`EDGE_FIRST`] and
+/// [`EDGE_SECOND`] where a vertex of either lies on an occlusion edge.
+fn quad_bits(
+    surfaces: &Surfaces,
+    joins: &[u8],
+    (row, col): (usize, usize),
+    (rows, cols): (usize, usize),
+) -> u8 {
+    if row + 1 >= rows {
+        return 0;
+    }
+    let a = row * cols + col;
+    let b = row * cols + if col + 1 == cols { 0 } else { col + 1 };
+    let (c, d) = (a + cols, b + cols);
+    let all = |bits: [bool; 3]| bits.iter().all(|&bit| bit);
+    let anti = joins[a] & JOIN_ANTI != 0;
+    let first = all([joins[a] & JOIN_RIGHT != 0, anti, joins[a] & JOIN_DOWN != 0]);
+    let second = all([joins[b] & JOIN_DOWN != 0, joins[c] & JOIN_RIGHT != 0, anti]);
+    let edge = &surfaces.edge;
+    let mut bits = 0;
+    if first {
+        bits |= QUAD_FIRST;
+    }
+    if second {
+        bits |= QUAD_SECOND;
+    }
+    if edge[a] || edge[b] || edge[c] {
+        bits |= EDGE_FIRST;
+    }
+    if edge[b] || edge[d] || edge[c] {
+        bits |= EDGE_SECOND;
+    }
+    bits
 }
 
 pub(super) const JOIN_RIGHT: u8 = 1;
 pub(super) const JOIN_DOWN: u8 = 2;
 pub(super) const JOIN_ANTI: u8 = 4;
+pub(super) const QUAD_FIRST: u8 = 8;
+pub(super) const QUAD_SECOND: u8 = 16;
+pub(super) const EDGE_FIRST: u8 = 32;
+pub(super) const EDGE_SECOND: u8 = 64;
 
 /// Whether the mesh edge between source cells `x` and `y` lies on one
 /// surface: the scan's table (`joined`, from [`mesh_joins`]) where neither

@@ -105,12 +105,30 @@ pub struct Rendered {
 #[derive(Clone, Copy)]
 struct Vertex {
     position: Point3<f64>,
-    /// The source surface's fitted normal, in the target frame (zero where
-    /// none was fitted, and on dense sensors, whose triangles have their own).
-    normal: Vector3<f64>,
     row: f64,
     col: f64,
     time_ns: StampNs,
+}
+
+/// The moved source vertices of one render, column-major (the vertex of
+/// source row `r`, column `c` at `c * rows + r`): each column is warped with
+/// one transform cache and written in place, and a quad's two rows are
+/// neighbours in memory.
+struct Vertices {
+    rows: usize,
+    at: Vec<Option<Vertex>>,
+    /// The source surface's fitted normal of each vertex, in the target
+    /// frame, column-major too: only on sparse sensors, whose rings are
+    /// rendered with them (dense sensors' triangles have their own); empty
+    /// otherwise.
+    normal: Vec<Vector3<f64>>,
+}
+
+impl Vertices {
+    #[inline]
+    fn get(&self, row: usize, col: usize) -> Option<&Vertex> {
+        self.at[col * self.rows + row].as_ref()
+    }
 }
 
 pub fn render(
@@ -125,42 +143,54 @@ pub fn render(
     // A sparse sensor's rings are rendered segment by segment, with their
     // vertices' normals (`rasterize_ring`); triangles have their own.
     let sparse = geometry.sparse_rows();
+    let rows = geometry.rows;
+    let mut vertices = Vertices {
+        rows,
+        at: vec![None; cells],
+        normal: if sparse {
+            vec![Vector3::zeros(); cells]
+        } else {
+            Vec::new()
+        },
+    };
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
-    let columns: Vec<Vec<Option<Vertex>>> = (0..geometry.cols)
-        .into_par_iter()
-        .map(|col| {
-            let mut cache = TransformCache::new(trajectory, &arrivals);
-            (0..geometry.rows)
-                .map(|row| {
-                    warp_vertex(
-                        source,
-                        target,
-                        geometry,
-                        scan_offset_ns,
-                        row * geometry.cols + col,
-                        &mut cache,
-                        sparse,
-                    )
-                })
-                .collect()
-        })
-        .collect();
-    // Into row-major order, a row per task.
-    let mut vertices: Vec<Option<Vertex>> = vec![None; cells];
-    vertices
-        .par_chunks_mut(geometry.cols)
-        .enumerate()
-        .for_each(|(row, cells_of_row)| {
-            for (vertex, column) in cells_of_row.iter_mut().zip(&columns) {
-                *vertex = column[row];
-            }
-        });
+    let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
+        let mut cache = TransformCache::new(trajectory, &arrivals);
+        for (row, vertex) in column.iter_mut().enumerate() {
+            let cell = row * geometry.cols + col;
+            let normal = normals.get_mut(row);
+            *vertex = warp_vertex(
+                source,
+                target,
+                geometry,
+                scan_offset_ns,
+                cell,
+                &mut cache,
+                normal,
+            );
+        }
+    };
+    let chunk = rows.max(1);
+    if sparse {
+        vertices
+            .at
+            .par_chunks_mut(chunk)
+            .zip(vertices.normal.par_chunks_mut(chunk))
+            .enumerate()
+            .for_each(|(col, (column, normals))| warp_column(col, column, normals));
+    } else {
+        vertices
+            .at
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .for_each(|(col, column)| warp_column(col, column, &mut []));
+    }
     let proxy = fill_dropouts(source, geometry, &mut vertices);
     let candidates: Vec<Vec<Candidate>> = if sparse {
         (0..geometry.rows)
             .into_par_iter()
-            .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy, row))
+            .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy.cell, row))
             .collect()
     } else {
         (0..geometry.rows.saturating_sub(1))

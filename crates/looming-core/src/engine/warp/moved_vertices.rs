@@ -103,8 +103,8 @@ impl<'a> TransformCache<'a> {
 }
 
 /// The source return of `cell` moved into the target: where it lands (image
-/// coordinates), with its normal where `with_normal`; `None` without a
-/// return, or where it lands across the seam of the sweep.
+/// coordinates), with its normal into `normal` where one is asked for;
+/// `None` without a return, or where it lands across the seam of the sweep.
 pub(super) fn warp_vertex(
     source: &Source,
     target: &Target,
@@ -112,7 +112,7 @@ pub(super) fn warp_vertex(
     scan_offset_ns: StampNs,
     cell: usize,
     cache: &mut TransformCache,
-    with_normal: bool,
+    normal: Option<&mut Vector3<f64>>,
 ) -> Option<Vertex> {
     let range = f64::from(source.surfaces.range_m[cell]);
     if !range.is_finite() {
@@ -141,18 +141,16 @@ pub(super) fn warp_vertex(
         moved = transform * point;
         azimuth = source_azimuth + turn_rad((point.x, point.y), (moved.x, moved.y));
     }
-    let normal = if with_normal {
+    if let Some(normal) = normal {
         let n = source.surfaces.normal[cell];
-        transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]))
-    } else {
-        Vector3::zeros()
-    };
+        *normal =
+            transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+    }
     let level = |p: &Point3<f64>| (p.x * p.x + p.y * p.y).sqrt();
     let elevation = source.surfaces.elevation_rad[cell]
         + turn_rad((level(&point), point.z), (level(&moved), moved.z));
     Some(Vertex {
         position: moved,
-        normal,
         row: geometry.row_f_at(elevation, moved.coords.norm(), cell / geometry.cols),
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,

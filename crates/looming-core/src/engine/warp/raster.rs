@@ -5,8 +5,11 @@
 
 use nalgebra::Vector3;
 
-use super::mesh::{JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, on_one_surface};
-use super::{Candidate, REACH_SLACK, Source, Target, Vertex};
+use super::mesh::{
+    EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
+    on_one_surface,
+};
+use super::{Candidate, REACH_SLACK, Source, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
 use crate::model::StampNs;
 
@@ -15,43 +18,118 @@ pub(super) fn rasterize_row(
     source: &Source,
     target: &Target,
     geometry: &ImageGeometry,
-    vertices: &[Option<Vertex>],
-    proxy: &[u32],
+    vertices: &Vertices,
+    proxies: &Proxies,
     row: usize,
 ) -> Vec<Candidate> {
     let cols = geometry.cols;
-    let mut out = Vec::new();
+    // About one candidate per quad: room for all without regrowing.
+    let mut out = Vec::with_capacity(cols + cols / 2);
+    let joins = &source.surfaces.joins;
+    // Where neither row bridged a dropout, every vertex stands for its own
+    // cell and the scan's table of triangles holds.
+    let own = !proxies.bridged_row[row] && !proxies.bridged_row[row + 1];
     for col in 0..cols {
-        let next = (col + 1) % cols;
         let a = row * cols + col;
-        let b = row * cols + next;
-        let c = (row + 1) * cols + col;
-        let d = (row + 1) * cols + next;
-        let joins = &source.surfaces.joins;
-        // Each edge with the table's verdict for its two cells (`mesh_joins`),
-        // which holds where neither is a bridged dropout.
-        let ab = (a, b, joins[a] & JOIN_RIGHT != 0);
-        let ac = (a, c, joins[a] & JOIN_DOWN != 0);
-        let bc = (b, c, joins[a] & JOIN_ANTI != 0);
-        let bd = (b, d, joins[b] & JOIN_DOWN != 0);
-        let dc = (c, d, joins[c] & JOIN_RIGHT != 0);
-        for ([i, j, k], edges) in [([a, b, c], [ab, bc, ac]), ([b, d, c], [bd, dc, bc])] {
-            let (Some(vi), Some(vj), Some(vk)) = (&vertices[i], &vertices[j], &vertices[k]) else {
-                continue;
-            };
-            if !edges
-                .into_iter()
-                .all(|(x, y, joined)| on_one_surface(source, proxy, (x, y), joined))
-            {
-                continue;
-            }
-            let edge = [i, j, k]
-                .iter()
-                .any(|&v| source.surfaces.edge[proxy[v] as usize]);
-            rasterize_triangle(target, geometry, [vi, vj, vk], edge, &mut out);
+        if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == 0 {
+            continue;
+        }
+        let next = if col + 1 == cols { 0 } else { col + 1 };
+        // Either triangle needs the diagonal's two vertices.
+        let (Some(vb), Some(vc)) = (vertices.get(row, next), vertices.get(row + 1, col)) else {
+            continue;
+        };
+        let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
+        // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
+        let quad = if own {
+            let bits = joins[a];
+            [
+                va.filter(|_| bits & QUAD_FIRST != 0)
+                    .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
+                vd.filter(|_| bits & QUAD_SECOND != 0)
+                    .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
+            ]
+        } else {
+            bridged_quad(
+                source,
+                &proxies.cell,
+                (a, a - col + next),
+                [va, Some(vb), Some(vc), vd],
+            )
+        };
+        if (quad[0].is_none() && quad[1].is_none())
+            || rasterize_quad(target, geometry, quad, &mut out)
+        {
+            continue;
+        }
+        for (corners, edge) in quad.into_iter().flatten() {
+            rasterize_triangle(target, geometry, corners, edge, &mut out);
         }
     }
     out
+}
+
+/// A quad's triangles, each with whether it touches an occlusion edge,
+/// where a vertex may stand for a bridged dropout: its edges judged on the
+/// cells the vertices stand for. Cells `a` and `b` (left and right, the
+/// next row's below them) and vertices `[a, b, c, d]`.
+fn bridged_quad<'v>(
+    source: &Source,
+    proxy: &[u32],
+    (a, b): (usize, usize),
+    [va, vb, vc, vd]: [Option<&'v Vertex>; 4],
+) -> [Option<([&'v Vertex; 3], bool)>; 2] {
+    let cols = source.surfaces.cols;
+    let (c, d) = (a + cols, b + cols);
+    let (Some(vb), Some(vc)) = (vb, vc) else {
+        return [None, None];
+    };
+    let joins = &source.surfaces.joins;
+    // Each edge with the table's verdict for its two cells (`mesh_joins`),
+    // which holds where neither is a bridged dropout.
+    let bc = (b, c, joins[a] & JOIN_ANTI != 0);
+    let triangles = [
+        (
+            va,
+            a,
+            [
+                (a, b, joins[a] & JOIN_RIGHT != 0),
+                bc,
+                (a, c, joins[a] & JOIN_DOWN != 0),
+            ],
+        ),
+        (
+            vd,
+            d,
+            [
+                (b, d, joins[b] & JOIN_DOWN != 0),
+                (c, d, joins[c] & JOIN_RIGHT != 0),
+                bc,
+            ],
+        ),
+    ];
+    let mut quad = [None, None];
+    for (k, (apex, apex_cell, edges)) in triangles.into_iter().enumerate() {
+        let Some(apex) = apex else {
+            continue;
+        };
+        if !edges
+            .into_iter()
+            .all(|(x, y, joined)| on_one_surface(source, proxy, (x, y), joined))
+        {
+            continue;
+        }
+        let edge = [apex_cell, b, c]
+            .iter()
+            .any(|&v| source.surfaces.edge[proxy[v] as usize]);
+        let corners = if k == 0 {
+            [apex, vb, vc]
+        } else {
+            [vb, apex, vc]
+        };
+        quad[k] = Some((corners, edge));
+    }
+    quad
 }
 
 /// A sparse sensor's ring rendered into the same ring of the target: each
@@ -63,17 +141,23 @@ pub(super) fn rasterize_ring(
     source: &Source,
     target: &Target,
     geometry: &ImageGeometry,
-    vertices: &[Option<Vertex>],
+    vertices: &Vertices,
     proxy: &[u32],
     row: usize,
 ) -> Vec<Candidate> {
     let cols = geometry.cols;
+    let rows = geometry.rows;
     let mut out = Vec::new();
     for col in 0..cols {
-        let (a, b) = (row * cols + col, row * cols + (col + 1) % cols);
-        let (Some(va), Some(vb)) = (&vertices[a], &vertices[b]) else {
+        let next = (col + 1) % cols;
+        let (a, b) = (row * cols + col, row * cols + next);
+        let (Some(va), Some(vb)) = (vertices.get(row, col), vertices.get(row, next)) else {
             continue;
         };
+        let (na, nb) = (
+            vertices.normal[col * rows + row],
+            vertices.normal[next * rows + row],
+        );
         let joined = source.surfaces.joins[a] & JOIN_RIGHT != 0;
         if !on_one_surface(source, proxy, (a, b), joined) {
             continue;
@@ -103,7 +187,7 @@ pub(super) fn rasterize_ring(
             if !(-1e-9..=1.0 + 1e-9).contains(&w) {
                 continue;
             }
-            let normal = va.normal * (1.0 - w) + vb.normal * w;
+            let normal = na * (1.0 - w) + nb * w;
             if normal.norm_squared() < 0.25 {
                 continue;
             }
@@ -134,6 +218,208 @@ pub(super) fn rasterize_ring(
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
 const MAX_SPAN_CELLS: f64 = 24.0;
 
+/// Every target ray inside a quad's triangles (`None` for one the mesh
+/// does not hold), into `out`, where the quad lies away from the seam of
+/// the sweep (columns need no unwrapping): the cells of the quad's box are
+/// visited once for both triangles, the first triangle's candidate of a
+/// cell before the second's, as the z-buffer keeps the first of equal
+/// ranges. The same candidates as [`rasterize_triangle`] on each (a larger
+/// box holds no more rays inside a triangle). `false`, with nothing done,
+/// near the seam.
+fn rasterize_quad(
+    target: &Target,
+    geometry: &ImageGeometry,
+    triangles: [Option<([&Vertex; 3], bool)>; 2],
+    out: &mut Vec<Candidate>,
+) -> bool {
+    let cols = geometry.cols as f64;
+    let (row_reach, col_reach) = (target.reach.0 + REACH_SLACK, target.reach.1 + REACH_SLACK);
+    let (mut r_min, mut r_max) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut c_min, mut c_max) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (v, _) in triangles.iter().flatten() {
+        for vertex in v {
+            (r_min, r_max) = (r_min.min(vertex.row), r_max.max(vertex.row));
+            (c_min, c_max) = (c_min.min(vertex.col), c_max.max(vertex.col));
+        }
+    }
+    // Away from the seam, every column lies within a quarter turn of every
+    // other: unwrapping leaves them as they are, and the box's columns need
+    // no wrapping.
+    if !(c_min - col_reach >= 1.0 && c_max + col_reach <= cols - 2.0 && c_max - c_min <= cols / 4.0)
+    {
+        return false;
+    }
+    let first = triangles[0].and_then(|(v, edge)| FlatTriangle::set_up(v, edge));
+    let second = triangles[1].and_then(|(v, edge)| FlatTriangle::set_up(v, edge));
+    if first.is_none() && second.is_none() {
+        return true;
+    }
+    let mut planes = [None, None];
+    let row_lo = r_min.floor().max((r_min - row_reach).ceil()).max(0.0) as usize;
+    let row_hi = (r_max.ceil().min((r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
+    let col_lo = c_min.floor().max((c_min - col_reach).ceil()) as usize;
+    let col_hi = c_max.ceil().min((c_max + col_reach).floor()) as usize;
+    for row in row_lo..=row_hi {
+        for col in col_lo..=col_hi {
+            let cell = row * geometry.cols + col;
+            if !target.surfaces.range_m[cell].is_finite() {
+                continue;
+            }
+            let (tr, tc) = target.coords[cell];
+            let (tr, tc) = (f64::from(tr), f64::from(tc));
+            for (triangle, plane) in [&first, &second].into_iter().zip(&mut planes) {
+                let Some(triangle) = triangle else {
+                    continue;
+                };
+                let w = triangle.weights(tr, unwrap_near(tc, triangle.c0, geometry.cols));
+                if let Some(w) = w
+                    && let Some(hit) = hit(target, cell, triangle.v, w, triangle.edge, plane)
+                {
+                    out.push(hit);
+                }
+            }
+        }
+    }
+    true
+}
+
+/// A triangle away from the seam, set up for the barycentric tests: the
+/// differences [`barycentric`] takes of its coordinates, taken once.
+struct FlatTriangle<'v> {
+    v: [&'v Vertex; 3],
+    /// Its first column, to unwrap the rays' next to.
+    c0: f64,
+    /// Its third vertex's row and column.
+    r2: f64,
+    c2: f64,
+    /// `[r1 - r2, c2 - c1, r2 - r0, c0 - c2]`.
+    steps: [f64; 4],
+    inverse_denominator: f64,
+    edge: bool,
+}
+
+impl<'v> FlatTriangle<'v> {
+    /// `None` for a triangle [`rasterize_triangle`] skips: wider than
+    /// [`MAX_SPAN_CELLS`] (a bridge) or degenerate.
+    #[inline]
+    fn set_up(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
+        let (r, c) = (
+            [v[0].row, v[1].row, v[2].row],
+            [v[0].col, v[1].col, v[2].col],
+        );
+        let (r_min, r_max) = (r[0].min(r[1]).min(r[2]), r[0].max(r[1]).max(r[2]));
+        let (c_min, c_max) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+        if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
+            return None;
+        }
+        let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
+        if denominator.abs() < 1e-12 {
+            return None;
+        }
+        Some(Self {
+            v,
+            c0: c[0],
+            r2: r[2],
+            c2: c[2],
+            steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]],
+            inverse_denominator: 1.0 / denominator,
+            edge,
+        })
+    }
+
+    /// [`barycentric`]'s weights, the same operations on the same values,
+    /// the first tested before the second is computed.
+    #[inline]
+    fn weights(&self, tr: f64, tc: f64) -> Option<[f64; 3]> {
+        const EDGE: f64 = -1e-9;
+        let (dc, dr) = (tc - self.c2, tr - self.r2);
+        let [k0, k1, k2, k3] = self.steps;
+        let w0 = (k0 * dc + k1 * dr) * self.inverse_denominator;
+        if w0 < EDGE {
+            return None;
+        }
+        let w1 = (k2 * dc + k3 * dr) * self.inverse_denominator;
+        let w2 = 1.0 - w0 - w1;
+        if w1 < EDGE || w2 < EDGE {
+            return None;
+        }
+        Some([w0, w1, w2])
+    }
+}
+
+/// The barycentric weights of `(tr, tc)` in the triangle with rows `r` and
+/// columns `c`, where it lies inside (to a tolerance).
+#[inline]
+fn barycentric(
+    r: &[f64; 3],
+    c: &[f64; 3],
+    inverse_denominator: f64,
+    tr: f64,
+    tc: f64,
+) -> Option<[f64; 3]> {
+    let w0 = ((r[1] - r[2]) * (tc - c[2]) + (c[2] - c[1]) * (tr - r[2])) * inverse_denominator;
+    let w1 = ((r[2] - r[0]) * (tc - c[2]) + (c[0] - c[2]) * (tr - r[2])) * inverse_denominator;
+    let w2 = 1.0 - w0 - w1;
+    const EDGE: f64 = -1e-9;
+    if w0 < EDGE || w1 < EDGE || w2 < EDGE {
+        return None;
+    }
+    Some([w0, w1, w2])
+}
+
+/// The candidate of target `cell`, whose ray falls inside triangle `v`
+/// with barycentric weights `w`: the range where it meets the triangle's
+/// plane (computed once a ray falls inside: about half the triangles hold
+/// none, a quad's two share its one or two rays).
+#[inline]
+fn hit(
+    target: &Target,
+    cell: usize,
+    v: [&Vertex; 3],
+    [w0, w1, w2]: [f64; 3],
+    edge: bool,
+    plane: &mut Option<TrianglePlane>,
+) -> Option<Candidate> {
+    let direction = target.surfaces.direction[cell];
+    let e = Vector3::new(
+        f64::from(direction[0]),
+        f64::from(direction[1]),
+        f64::from(direction[2]),
+    );
+    let plane = plane.get_or_insert_with(|| TrianglePlane::through(v));
+    let along = plane.normal.dot(&e);
+    if along.abs() < 1e-12 * plane.normal_norm {
+        return None;
+    }
+    let range = plane.offset / along;
+    if !(range > 0.0 && range.is_finite()) {
+        return None;
+    }
+    let time = (w0 * v[0].time_ns as f64 + w1 * v[1].time_ns as f64 + w2 * v[2].time_ns as f64)
+        .round() as StampNs;
+    Some(Candidate {
+        cell: cell as u32,
+        range_m: range as f32,
+        time_ns: time,
+        normal: plane.unit,
+        edge,
+    })
+}
+
+/// `c` moved by whole turns next to column `near` (across the seam behind
+/// the sensor).
+#[inline]
+fn unwrap_near(c: f64, near: f64, cols: usize) -> f64 {
+    let cols = cols as f64;
+    if c - near > cols / 2.0 {
+        c - cols
+    } else if near - c > cols / 2.0 {
+        c + cols
+    } else {
+        c
+    }
+}
+
 /// Every target ray inside the triangle `v` (image coordinates), with the
 /// range where it meets the triangle's plane, into `out`.
 fn rasterize_triangle(
@@ -143,17 +429,8 @@ fn rasterize_triangle(
     edge: bool,
     out: &mut Vec<Candidate>,
 ) {
-    let cols = geometry.cols as f64;
     // Unwrap columns around the first vertex (the seam behind the sensor).
-    let unwrap = |c: f64| {
-        let mut c = c;
-        if c - v[0].col > cols / 2.0 {
-            c -= cols;
-        } else if v[0].col - c > cols / 2.0 {
-            c += cols;
-        }
-        c
-    };
+    let unwrap = |c: f64| unwrap_near(c, v[0].col, geometry.cols);
     let (r, c) = (
         [v[0].row, v[1].row, v[2].row],
         [v[0].col, unwrap(v[1].col), unwrap(v[2].col)],
@@ -167,59 +444,24 @@ fn rasterize_triangle(
         return;
     }
     let inverse_denominator = 1.0 / denominator;
-    // The triangle's plane, once a ray falls inside it (about half the
-    // triangles hold none: a quad's two share its one or two rays).
     let mut plane = None;
     let cols_i = geometry.cols as i64;
     for row in row_lo..=row_hi {
         for col_unwrapped in col_lo..=col_hi {
             let col = wrap_col(col_unwrapped, cols_i);
             let cell = row * geometry.cols + col;
-            let direction = target.surfaces.direction[cell];
             if !target.surfaces.range_m[cell].is_finite() {
                 continue;
             }
             let (tr, tc) = target.coords[cell];
-            let (tr, mut tc) = (f64::from(tr), f64::from(tc));
             // Bring the target's column next to the triangle's.
-            if tc - c[0] > cols / 2.0 {
-                tc -= cols;
-            } else if c[0] - tc > cols / 2.0 {
-                tc += cols;
-            }
-            let w0 =
-                ((r[1] - r[2]) * (tc - c[2]) + (c[2] - c[1]) * (tr - r[2])) * inverse_denominator;
-            let w1 =
-                ((r[2] - r[0]) * (tc - c[2]) + (c[0] - c[2]) * (tr - r[2])) * inverse_denominator;
-            let w2 = 1.0 - w0 - w1;
-            const EDGE: f64 = -1e-9;
-            if w0 < EDGE || w1 < EDGE || w2 < EDGE {
+            let tc = unwrap_near(f64::from(tc), c[0], geometry.cols);
+            let Some(w) = barycentric(&r, &c, inverse_denominator, f64::from(tr), tc) else {
                 continue;
+            };
+            if let Some(hit) = hit(target, cell, v, w, edge, &mut plane) {
+                out.push(hit);
             }
-            let e = Vector3::new(
-                f64::from(direction[0]),
-                f64::from(direction[1]),
-                f64::from(direction[2]),
-            );
-            let plane = plane.get_or_insert_with(|| TrianglePlane::through(v));
-            let along = plane.normal.dot(&e);
-            if along.abs() < 1e-12 * plane.normal_norm {
-                continue;
-            }
-            let range = plane.offset / along;
-            if !(range > 0.0 && range.is_finite()) {
-                continue;
-            }
-            let time =
-                (w0 * v[0].time_ns as f64 + w1 * v[1].time_ns as f64 + w2 * v[2].time_ns as f64)
-                    .round() as StampNs;
-            out.push(Candidate {
-                cell: cell as u32,
-                range_m: range as f32,
-                time_ns: time,
-                normal: plane.unit,
-                edge,
-            });
         }
     }
 }
@@ -279,5 +521,140 @@ impl TrianglePlane {
             offset: normal.dot(&v[0].position.coords),
             unit: [unit.x as f32, unit.y as f32, unit.z as f32],
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::beams::BeamTable;
+    use crate::engine::surface::Surfaces;
+    use nalgebra::Point3;
+
+    /// A 4 x 64 target whose rays' coordinates lie up to 0.45 cell from
+    /// their cells, one cell in nine empty.
+    fn target_parts(rows: usize, cols: usize) -> (ImageGeometry, Surfaces, Vec<(f32, f32)>) {
+        let cells = rows * cols;
+        let jitter = |k: usize, salt: usize| {
+            ((k * 7919 + salt * 104_729) % 1000) as f32 / 1000.0 * 0.9 - 0.45
+        };
+        let coords: Vec<(f32, f32)> = (0..cells)
+            .map(|k| {
+                let col = (k % cols) as f32 + jitter(k, 1);
+                let col = if col < 0.0 { col + cols as f32 } else { col };
+                ((k / cols) as f32 + jitter(k, 2), col)
+            })
+            .collect();
+        let direction = coords
+            .iter()
+            .map(|&(r, c)| {
+                let (azimuth, elevation) = (f64::from(c) * 0.01, 0.02 * f64::from(r) - 0.03);
+                let e = [
+                    elevation.cos() * azimuth.cos(),
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                ];
+                e.map(|x| x as f32)
+            })
+            .collect();
+        let surfaces = Surfaces {
+            range_m: (0..cells)
+                .map(|k| if k % 9 == 4 { f32::NAN } else { 10.0 })
+                .collect(),
+            direction,
+            normal: vec![[0.0; 3]; cells],
+            incidence_cos: vec![1.0; cells],
+            support: vec![1; cells],
+            edge: vec![false; cells],
+            noise_m_per_row: vec![0.02; rows],
+            range_bias_m_per_row: vec![0.0; rows],
+            joins: vec![0; cells],
+            azimuth_rad: vec![0.0; cells],
+            elevation_rad: vec![0.0; cells],
+            cols,
+        };
+        let geometry = ImageGeometry {
+            rows,
+            cols,
+            beams: BeamTable::uniform(rows, -0.03, 0.03),
+            ring_to_row: None,
+            parallax_rad_m: None,
+        };
+        (geometry, surfaces, coords)
+    }
+
+    fn key(c: &Candidate) -> (u32, u32, StampNs, [u32; 3], bool) {
+        (
+            c.cell,
+            c.range_m.to_bits(),
+            c.time_ns,
+            c.normal.map(f32::to_bits),
+            c.edge,
+        )
+    }
+
+    #[test]
+    fn a_quads_box_gives_each_triangles_candidates_in_the_same_order_per_cell() {
+        let (geometry, surfaces, coords) = target_parts(4, 64);
+        let column_time_ns = vec![0; 64];
+        let target = Target::new(&surfaces, &coords, &column_time_ns);
+        let mut state = 12_345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut quads, mut candidates) = (0, 0);
+        for _ in 0..4000 {
+            // A quad around a random spot, sheared and moved by up to a
+            // cell, on the seam now and then; sometimes a thin or
+            // degenerate one.
+            let (row, col) = (next() * 2.5, next() * 64.0);
+            let corner = |dr: f64, dc: f64, next: &mut dyn FnMut() -> f64| {
+                let c = col + dc + next() - 0.5;
+                Vertex {
+                    position: Point3::new(10.0 + next(), next() * 4.0, dr + next()),
+                    row: row + dr * (0.2 + next()) + next() - 0.5,
+                    col: if c >= 64.0 { c - 64.0 } else { c },
+                    time_ns: (next() * 1e8) as StampNs,
+                }
+            };
+            let v = [
+                corner(0.0, 0.0, &mut next),
+                corner(0.0, 1.0, &mut next),
+                corner(1.0, 0.0, &mut next),
+                corner(1.0, 1.0, &mut next),
+            ];
+            let (first, second) = (next() < 0.8, next() < 0.8);
+            let triangles = [
+                first.then_some(([&v[0], &v[1], &v[2]], next() < 0.5)),
+                second.then_some(([&v[1], &v[3], &v[2]], next() < 0.5)),
+            ];
+            let mut expected = Vec::new();
+            for (corners, edge) in triangles.into_iter().flatten() {
+                rasterize_triangle(&target, &geometry, corners, edge, &mut expected);
+            }
+            let mut got = Vec::new();
+            if !rasterize_quad(&target, &geometry, triangles, &mut got) {
+                assert!(got.is_empty());
+                continue;
+            }
+            quads += 1;
+            candidates += expected.len();
+            // The z-buffer sees each cell's candidates in turn: the same
+            // per cell, in the same order.
+            expected.sort_by_key(|c| c.cell);
+            got.sort_by_key(|c| c.cell);
+            let (expected, got): (Vec<_>, Vec<_>) = (
+                expected.iter().map(key).collect(),
+                got.iter().map(key).collect(),
+            );
+            assert_eq!(got, expected);
+        }
+        assert!(
+            quads > 3000 && candidates > 1500,
+            "{quads} quads, {candidates} candidates"
+        );
     }
 }
