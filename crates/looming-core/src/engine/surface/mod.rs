@@ -49,7 +49,9 @@ pub struct Surfaces {
     /// (`bias::estimate`; all zero where the scan shows none).
     pub range_bias_m_per_row: Vec<f32>,
     /// Per cell, the neighbours it shares a surface with in the mesh the
-    /// renderer builds (`warp::mesh_joins`).
+    /// renderer builds, and which of the two triangles of the quad it
+    /// starts exist and touch an occlusion edge (`warp::mesh_joins`, whose
+    /// bit constants say which bit is which).
     pub joins: Vec<u8>,
     /// Azimuth and elevation of each cell's return (of `direction`), radians
     /// (NaN empty): computed once per scan, as each render of the scan
