@@ -142,7 +142,7 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
         // slope `minors`): the same bits, without its products.
         smallest = det / minors;
         if smallest > NEWTON_CONVERGED * trace {
-            smallest = newton_from(smallest, trace, minors, det);
+            smallest = newton_from(smallest, (trace, minors, det), NEWTON_CONVERGED);
         }
     }
     // The other two: sum `trace - smallest`, product `minors - smallest * sum`.
@@ -156,8 +156,12 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
 
 /// Newton's iteration for the smallest root of the characteristic
 /// polynomial `-x^3 + trace x^2 - minors x + det` (sign flipped), from
-/// `start`, below it.
-fn newton_from(start: f64, trace: f64, minors: f64, det: f64) -> f64 {
+/// `start`, below it, until a step falls below `converged` of the trace.
+pub(super) fn newton_from(
+    start: f64,
+    (trace, minors, det): (f64, f64, f64),
+    converged: f64,
+) -> f64 {
     let mut smallest = start;
     for _ in 1..NEWTON_STEPS {
         let value = ((smallest - trace) * smallest + minors) * smallest - det;
@@ -171,7 +175,7 @@ fn newton_from(start: f64, trace: f64, minors: f64, det: f64) -> f64 {
         // over the middle eigenvalue (at least 1e-3 of the trace for a
         // plane), so a step of 1e-10 of the trace leaves under 1e-16 of
         // it, and the step that would show as much is not taken.
-        if step.abs() <= NEWTON_CONVERGED * trace {
+        if step.abs() <= converged * trace {
             break;
         }
     }

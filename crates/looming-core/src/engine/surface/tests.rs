@@ -225,30 +225,19 @@ fn eigenvalues_of_a_diagonal_matrix_are_its_diagonal() {
     assert!((a - 1.0).abs() < 1e-12 && (b - 2.0).abs() < 1e-12 && (c - 3.0).abs() < 1e-12);
 }
 
-/// The smallest eigenvalue by Newton's method iterated until its step is
-/// below 1e-14 of the trace (the stop before `NEWTON_CONVERGED`).
+/// The smallest eigenvalue by Newton's method from 0 iterated until its
+/// step is below 1e-14 of the trace (the stop before `NEWTON_CONVERGED`).
 fn smallest_eigenvalue_to_1e14(a: &Matrix3<f64>) -> f64 {
     let (trace, minors, det) = (
         a.trace(),
         super::plane::principal_minors(a),
         a.determinant(),
     );
-    let mut smallest = 0.0f64;
     if minors > 0.0 && det > 0.0 {
-        for _ in 0..30 {
-            let value = ((smallest - trace) * smallest + minors) * smallest - det;
-            let slope = (3.0 * smallest - 2.0 * trace) * smallest + minors;
-            if slope <= 0.0 {
-                break;
-            }
-            let step = value / slope;
-            smallest -= step;
-            if step.abs() <= 1e-14 * trace {
-                break;
-            }
-        }
+        super::plane::newton_from(0.0, (trace, minors, det), 1e-14)
+    } else {
+        0.0
     }
-    smallest
 }
 
 #[test]

@@ -50,12 +50,7 @@ pub(super) fn rasterize_row(
                     .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
             ]
         } else {
-            bridged_quad(
-                source,
-                &proxies.cell,
-                (a, a - col + next),
-                [va, Some(vb), Some(vc), vd],
-            )
+            bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
         };
         if (quad[0].is_none() && quad[1].is_none())
             || rasterize_quad(target, geometry, quad, &mut out)
@@ -72,18 +67,21 @@ pub(super) fn rasterize_row(
 /// A quad's triangles, each with whether it touches an occlusion edge,
 /// where a vertex may stand for a bridged dropout: its edges judged on the
 /// cells the vertices stand for. Cells `a` and `b` (left and right, the
-/// next row's below them) and vertices `[a, b, c, d]`.
+/// next row's below them) and vertices `(a, b, c, d)`, the diagonal's `b`
+/// and `c` present (either triangle needs them).
 fn bridged_quad<'v>(
     source: &Source,
     proxy: &[u32],
     (a, b): (usize, usize),
-    [va, vb, vc, vd]: [Option<&'v Vertex>; 4],
+    (va, vb, vc, vd): (
+        Option<&'v Vertex>,
+        &'v Vertex,
+        &'v Vertex,
+        Option<&'v Vertex>,
+    ),
 ) -> [Option<([&'v Vertex; 3], bool)>; 2] {
     let cols = source.surfaces.cols;
     let (c, d) = (a + cols, b + cols);
-    let (Some(vb), Some(vc)) = (vb, vc) else {
-        return [None, None];
-    };
     let joins = &source.surfaces.joins;
     // Each edge with the table's verdict for its two cells (`mesh_joins`),
     // which holds where neither is a bridged dropout.
@@ -164,16 +162,7 @@ pub(super) fn rasterize_ring(
         }
         let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);
         let edge = source.surfaces.edge[pa] || source.surfaces.edge[pb];
-        let unwrap = |c: f64, near: f64| {
-            if c - near > cols as f64 / 2.0 {
-                c - cols as f64
-            } else if near - c > cols as f64 / 2.0 {
-                c + cols as f64
-            } else {
-                c
-            }
-        };
-        let (ca, cb) = (va.col, unwrap(vb.col, va.col));
+        let (ca, cb) = (va.col, unwrap_near(vb.col, va.col, cols));
         if (cb - ca).abs() < 1e-9 || (cb - ca).abs() > MAX_SPAN_CELLS {
             continue;
         }
@@ -182,7 +171,7 @@ pub(super) fn rasterize_ring(
             if !target.surfaces.range_m[cell].is_finite() {
                 continue;
             }
-            let tc = unwrap(f64::from(target.coords[cell].1), ca);
+            let tc = unwrap_near(f64::from(target.coords[cell].1), ca, cols);
             let w = (tc - ca) / (cb - ca);
             if !(-1e-9..=1.0 + 1e-9).contains(&w) {
                 continue;
