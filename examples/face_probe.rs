@@ -121,7 +121,11 @@ fn main() {
         y_half: number(4, 1.0),
         z: (number(5, -1.4), number(6, 0.5)),
     };
-    let config = EngineConfig::default();
+    // FIRINGS=2: the coarser image of `process --firings-per-column 2`.
+    let config = EngineConfig {
+        firings_per_column: std::env::var("FIRINGS").map_or(1, |f| f.parse().unwrap()),
+        ..EngineConfig::default()
+    };
     let mut cache = EngineCache::default();
     let mut faces: Vec<Face> = Vec::new();
     let mut tracker = ObjectTracker::default();

@@ -5,13 +5,15 @@
 # LIDARS=3 scripts/accuracy.sh 64 2048: the vehicle with three LiDARs (synth
 # --lidars 3; BEAMS x COLUMNS is the roof's, the side sensors 32 x 1024 at
 # 20 Hz), a row per sensor. FRAME=vehicle|world: the clouds written in that
-# frame (synth --frame), for the sensor-origin check.
+# frame (synth --frame), for the sensor-origin check. FIRINGS=2: the
+# coarser range image of `process --firings-per-column 2`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 beams=${1:-32}
 columns=${2:-512}
 lidars=${LIDARS:-1}
 frame=${FRAME:-sensor}
+firings=${FIRINGS:-1}
 if [ "$lidars" -gt 1 ]; then
   topics="/lidar_roof/points /lidar_left/points /lidar_right/points"
   topics=$(echo $topics | cut -d' ' -f1-"$lidars")
@@ -29,10 +31,10 @@ for spec in "straight-road 0 2" "urban-turn 0 2" "follow 0 2" "cut-in 2 4" "cros
   for topic in $topics; do
   name="$1"
   if [ "$topic" = auto ]; then
-    ./target/release/looming eval "$out/$1.mcap" --json "$out/$1.json" > /dev/null
+    ./target/release/looming eval "$out/$1.mcap" --firings-per-column "$firings" --json "$out/$1.json" > /dev/null
   else
     name="$1 ${topic%/points}"
-    ./target/release/looming eval "$out/$1.mcap" --lidar-topic "$topic" --json "$out/$1.json" > /dev/null
+    ./target/release/looming eval "$out/$1.mcap" --firings-per-column "$firings" --lidar-topic "$topic" --json "$out/$1.json" > /dev/null
   fi
   python3 - "$out/$1.json" "$name" "$2-$3" <<'PY'
 import json, sys

@@ -134,16 +134,20 @@ fn close_to_input(written: [f32; 3], input: [f32; 3]) -> bool {
 /// The engine's results for every pair of `input`, by current log time,
 /// with the objects' looming fed back into their cells as `process` does.
 fn engine_results(input: &Path) -> BTreeMap<u64, (ScanPair, PairLooming)> {
+    engine_results_with(input, &EngineConfig::default())
+}
+
+/// [`engine_results`] with the engine set up as `config`.
+fn engine_results_with(input: &Path, config: &EngineConfig) -> EngineResults {
     let mut cache = EngineCache::default();
     let mut results = BTreeMap::new();
-    let config = EngineConfig::default();
     let mut tracker = looming::objects::ObjectTracker::default();
     looming::pipeline::replay(
         input,
         &looming::pipeline::ScanOptions::default(),
         &mut |_| {},
         &mut |pair| {
-            if let Some(mut result) = compute_with_cache(&pair, &config, &mut cache) {
+            if let Some(mut result) = compute_with_cache(&pair, config, &mut cache) {
                 looming::objects::PairObjects::find_tracked_fused(
                     &pair.current,
                     &mut result,
@@ -508,6 +512,43 @@ fn every_new_channel_decodes_with_its_schema_and_holds_the_engine_result() {
     assert_range_images_show_engine_values(&contents, &engine);
     assert_threat_zones_are_engine_spheres(&contents, &engine);
     assert_event_valid_and_same_in_file_and_log(&contents, &events_path);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_coarser_grid_halves_the_columns_and_still_holds_the_engine_result() {
+    // `--firings-per-column 2`: two firings of a beam share a cell, so the
+    // 512-column sensor is imaged at 256 columns, and every channel holds
+    // what the engine computes on that image.
+    let dir = scratch("annotate-coarse");
+    let input = synth(&dir, "cut-in", &["--start", "2.6", "--duration", "3.2"]);
+    let output = dir.join("out.mcap");
+    process(
+        &input,
+        &output,
+        &["--firings-per-column", "2", "--fields", "full"],
+    );
+    let contents = read_all(&std::fs::read(&output).unwrap());
+    let config = EngineConfig {
+        firings_per_column: 2,
+        ..EngineConfig::default()
+    };
+    let engine = engine_results_with(&input, &config);
+    assert!(engine.len() >= 5, "{} pairs", engine.len());
+    for (_, result) in engine.values() {
+        assert_eq!(
+            (result.geometry.rows, result.geometry.cols),
+            (32, 256),
+            "the coarser image"
+        );
+    }
+    assert_every_looming_channel_present(&contents);
+    let counts = assert_points_hold_engine_results(&contents, &engine);
+    assert!(
+        counts.moving > 0,
+        "the cut-in car moves on the coarser image"
+    );
+    assert_range_images_show_engine_values(&contents, &engine);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

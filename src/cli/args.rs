@@ -174,6 +174,10 @@ pub(crate) struct EvalArgs {
     /// rotation compensation buys).
     #[arg(long)]
     pub(crate) no_rotation_compensation: bool,
+    /// Range-image resolution: a beam's firings per image column (as
+    /// `process --firings-per-column`).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=8))]
+    pub(crate) firings_per_column: u16,
     /// Take the truth from this log instead (a `looming synth` drive whose
     /// scans have the same stamps and points, e.g. the one a KITTI-format
     /// folder was written from); points are matched by exact position.
@@ -402,6 +406,12 @@ pub(crate) struct AnnotateArgs {
     /// Threat levels low, medium, high as times to contact, seconds.
     #[arg(long, value_name = "LOW,MEDIUM,HIGH", default_value = "3,1.5,1", value_parser = parse_threat_ttc)]
     pub(crate) threat_ttc: [f64; 3],
+    /// Range-image resolution: a beam's firings per image column. 1 (the
+    /// default) gives every return its own cell; 2 halves the columns and
+    /// about halves the engine's time, for a coarser looming image
+    /// (docs/performance.md has what it costs).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=8))]
+    pub(crate) firings_per_column: u16,
     /// Near-miss threshold as a time to contact, seconds.
     #[arg(long, value_name = "SECONDS", default_value_t = 1.5)]
     pub(crate) event_ttc: f64,

@@ -208,6 +208,7 @@ fn failed_logs<'a>(
 fn eval(args: EvalArgs) -> Result<(), Failure> {
     let config = looming::engine::EngineConfig {
         rotation_compensation: !args.no_rotation_compensation,
+        firings_per_column: usize::from(args.firings_per_column),
         ..Default::default()
     };
     let scans = resolve::scan_options(&args.scans)?;

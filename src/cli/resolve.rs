@@ -156,6 +156,7 @@ fn annotate_config(args: &AnnotateArgs) -> Result<AnnotateConfig, Failure> {
     Ok(AnnotateConfig {
         engine: EngineConfig {
             threat_ttc_s: args.threat_ttc,
+            firings_per_column: usize::from(args.firings_per_column),
             ..EngineConfig::default()
         },
         events: event_config(args)?,

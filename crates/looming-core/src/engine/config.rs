@@ -5,6 +5,13 @@
 pub struct EngineConfig {
     /// Columns of the range image [default: the most points any beam holds].
     pub columns: Option<usize>,
+    /// Firings of a beam per range-image column where `columns` is unset:
+    /// 1 gives every firing its own cell (the default, the finest image);
+    /// 2 halves the columns, and about halves the engine's time, for a
+    /// coarser looming image (each cell keeps its nearest return; the other
+    /// takes the cell's values where it is the same surface).
+    #[serde(default = "one_firing_per_column")]
+    pub firings_per_column: usize,
     /// Range noise of the sensor (1 sigma), metres.
     pub range_noise_m: f64,
     /// Compensate the gyro rotation before differencing (METHOD.md); off only
@@ -34,6 +41,7 @@ impl Default for EngineConfig {
     fn default() -> Self {
         Self {
             columns: None,
+            firings_per_column: 1,
             range_noise_m: 0.02,
             rotation_compensation: true,
             // Autey 2012; Sacchi & Sayed 2016; Hayward 1972.
@@ -46,4 +54,8 @@ impl Default for EngineConfig {
             correct_range_bias: true,
         }
     }
+}
+
+fn one_firing_per_column() -> usize {
+    1
 }

@@ -303,7 +303,8 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
 
 /// The image geometry of a pair: rows from `ring` when both clouds have it
 /// (beam elevations measured per ring), else a beam table inferred from the
-/// current scan; columns from `columns`, else the most points any row holds.
+/// current scan; columns from `columns`, else the most points any row holds
+/// over `firings_per_column` (a coarser grid: `EngineConfig::firings_per_column`).
 ///
 /// `previous_cols`: the columns the previous pair's images had; kept where
 /// this scan's count is within [`KEPT_COLUMNS_TOLERANCE`] of it.
@@ -311,8 +312,10 @@ pub(crate) fn geometry_for(
     previous: &Scan,
     current: &Scan,
     columns: Option<usize>,
+    firings_per_column: usize,
     previous_cols: Option<usize>,
 ) -> Option<ImageGeometry> {
+    let firings_per_column = firings_per_column.max(1);
     if let (Some(rings), Some(_)) = (&current.ring, &previous.ring) {
         let rows = rings
             .iter()
@@ -325,7 +328,7 @@ pub(crate) fn geometry_for(
         let (beams, ring_to_row, parallax_rad_m) = ring_elevations(current, rows)?;
         let cols = columns.unwrap_or_else(|| {
             let counted = most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows);
-            kept_columns(counted, previous_cols)
+            kept_columns(counted.div_ceil(firings_per_column), previous_cols)
         });
         return (cols >= 8).then_some(ImageGeometry {
             rows,
@@ -345,7 +348,7 @@ pub(crate) fn geometry_for(
     let cols = columns.unwrap_or_else(|| {
         let counted =
             most_points_per_row(elevations.iter().map(|&e| beams.row_of(f64::from(e))), rows);
-        kept_columns(counted, previous_cols)
+        kept_columns(counted.div_ceil(firings_per_column), previous_cols)
     });
     (cols >= 8).then_some(ImageGeometry {
         rows,

@@ -179,6 +179,7 @@ pub fn compute_with_cache(
         previous,
         current,
         config.columns,
+        config.firings_per_column,
         last.as_ref().map(|c| c.cols),
     )?;
     let params = SurfaceParams::for_geometry(&geometry, config.range_noise_m);
