@@ -140,20 +140,25 @@ pub fn hot_clusters(
         .unwrap_or_default();
     components
         .into_iter()
-        .map(|cells| {
-            describe(
-                looming,
-                (corridor, objects, &object_cells),
-                &cells,
-                &position,
-            )
+        // The threshold first, from the cluster's looming alone: most
+        // clusters are below it (the floor's slow surroundings), and
+        // describing one takes every cell's offset from the corridor.
+        .filter_map(|cells| {
+            let looming_per_s = cluster_looming(looming, &cells);
+            (looming_per_s >= threshold_per_s).then(|| {
+                describe(
+                    looming,
+                    (corridor, objects, &object_cells),
+                    (&cells, looming_per_s),
+                    &position,
+                )
+            })
         })
         // An object covers an area; a line of cells one beam or one column
         // wide is the trace of an edge or of the sweep's seam.
         .filter(|cluster| cluster.rows.1 > cluster.rows.0 && cluster.cols.len >= 2)
         .filter(|cluster| {
-            cluster.looming_per_s >= threshold_per_s
-                && cluster.lateral_offset_m <= config.corridor_half_width_m()
+            cluster.lateral_offset_m <= config.corridor_half_width_m()
                 && plausible_if_static(cluster, looming.velocity_mps, config.facing_cos)
         })
         .collect()
@@ -271,16 +276,12 @@ fn connected_components(geometry: &ImageGeometry, hot: &[bool]) -> Vec<Vec<usize
     components
 }
 
-fn describe(
-    looming: &PairLooming,
-    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &[Vec<usize>]),
-    cells: &[usize],
-    position: &dyn Fn(usize) -> Option<Vector3<f64>>,
-) -> Cluster {
-    let cols = looming.geometry.cols;
-    // Trusted cells set the value when there are a few; edge cells only when
-    // the object is all edges (small or far at a coarse resolution): near
-    // corners an edge cell mixes two faces.
+/// A cluster's looming, 1/s: the median (upper middle) of its cells'.
+/// Trusted cells set the value when there are a few; edge cells only when
+/// the object is all edges (small or far at a coarse resolution): near
+/// corners an edge cell mixes two faces. `cells` are hot, so each has a
+/// looming (`event_looming`); NaN without a cell.
+fn cluster_looming(looming: &PairLooming, cells: &[usize]) -> f64 {
     let trusted: Vec<usize> = cells
         .iter()
         .copied()
@@ -295,7 +296,22 @@ fn describe(
         .iter()
         .filter_map(|&c| event_looming(looming, c))
         .collect();
-    values.sort_unstable_by(f64::total_cmp);
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let middle = values.len() / 2;
+    *values.select_nth_unstable_by(middle, f64::total_cmp).1
+}
+
+/// The cluster of hot `cells` whose looming is `looming_per_s`
+/// ([`cluster_looming`]).
+fn describe(
+    looming: &PairLooming,
+    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &[Vec<usize>]),
+    (cells, looming_per_s): (&[usize], f64),
+    position: &dyn Fn(usize) -> Option<Vector3<f64>>,
+) -> Cluster {
+    let cols = looming.geometry.cols;
     let mut ranges: Vec<f64> = cells
         .iter()
         .map(|&c| f64::from(looming.image.range_m[c]))
@@ -308,7 +324,7 @@ fn describe(
         // The object's whole footprint: an object in the path counts whole,
         // one beside it never, whichever of its parts is hot.
         Some((objects, index)) => {
-            let horizon_s = (1.0 / values[values.len() / 2]).clamp(0.0, PREDICTION_HORIZON_S);
+            let horizon_s = (1.0 / looming_per_s).clamp(0.0, PREDICTION_HORIZON_S);
             let cells = object_cells.get(index).map_or(&[][..], Vec::as_slice);
             object_offset_m(objects, (index, cells), (corridor, horizon_s), position)
         }
@@ -325,7 +341,7 @@ fn describe(
         cells: cells.len(),
         rows: (rows.clone().min().unwrap_or(0), rows.max().unwrap_or(0)),
         cols: ColSpan::covering(&occupied, cols),
-        looming_per_s: values[values.len() / 2],
+        looming_per_s,
         centroid_m: [centroid.x, centroid.y, centroid.z],
         range_m: ranges[ranges.len() / 2],
         near_range_m: ranges[ranges.len() / 10],

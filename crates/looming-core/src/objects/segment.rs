@@ -95,8 +95,19 @@ fn neighbours(
     cols: usize,
 ) -> impl Iterator<Item = (usize, Option<usize>)> {
     let (row, col) = (cell / cols, cell % cols);
-    let left = |k: usize| row * cols + (col + cols - k % cols) % cols;
-    let right = |k: usize| row * cols + (col + k) % cols;
+    // Columns `k` (1 or 2) to either side, wrapped by a comparison, not a
+    // division (this runs for every cell of every object; `k % cols` for
+    // an image narrower than `k` columns).
+    let row_start = row * cols;
+    let left = |k: usize| {
+        let k = if k < cols { k } else { k % cols };
+        row_start + if col >= k { col - k } else { col + cols - k }
+    };
+    let right = |k: usize| {
+        let k = if k < cols { k } else { k % cols };
+        let c = col + k;
+        row_start + if c >= cols { c - cols } else { c }
+    };
     let up = (row + 1 < rows).then(|| (cell + cols, None));
     let down = (row > 0).then(|| (cell - cols, None));
     [
