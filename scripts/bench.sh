@@ -10,6 +10,7 @@
 #              level 3, 4 MiB chunks: the same compression as `looming process`)
 #     process  looming process IN -o OUT --force -q --json-summary S.json
 #     full     the same with --fields full
+#     coarse   the same with --firings-per-column 2 (the coarser image)
 #   and prints Markdown tables per resolution (also written to
 #   $BENCH_DIR/bench-table.md, and per resolution to $BENCH_DIR/BxC/).
 #   The full run takes ~12 minutes on 2 cores and needs ~10 GB free in BENCH_DIR.
@@ -123,10 +124,11 @@ def read_sizes(name):
     return out
 
 in_bytes = int(open(f"{d}/input.bytes").read())
-summaries = {r: json.load(open(f"{d}/{r}.json")) for r in ("process", "full")}
+summaries = {r: json.load(open(f"{d}/{r}.json")) for r in ("process", "full", "coarse")}
 scans = summaries["process"]["decoded"]["scans"]
 runs = [("copy (mcap crate)", "copy"), ("looming process", "process"),
-        ("looming process --fields full", "full")]
+        ("looming process --fields full", "full"),
+        ("looming process --firings-per-column 2", "coarse")]
 t = {r: read_time(r) for _, r in runs}
 b = {r: int(open(f"{d}/{r}.bytes").read()) for _, r in runs}
 other = {r: max(0.0, float(open(f"{d}/{r}.busy").read()) - t[r][1]) for _, r in runs}
@@ -147,7 +149,7 @@ for label, r in runs:
 print()
 print("throughput / copy: the copy's wall time over the run's (1.0 = as fast as a bare copy). "
       "Output written by: " + ", ".join(
-          f"{r}: {summaries[r].get('write', {}).get('mode', '?')}" for r in ("process", "full")) + ".")
+          f"{r}: {summaries[r].get('write', {}).get('mode', '?')}" for r in ("process", "full", "coarse")) + ".")
 print()
 print("CPU s: user + system of the run; other CPU s: what the rest of the machine used "
       "meanwhile (/proc/stat), near 0 when the run was alone.")
@@ -181,7 +183,7 @@ for k in topics:
 print()
 print(f"| run | added (/looming/*) MB | added / LiDAR | LiDAR-only log: (LiDAR + added) / LiDAR |")
 print("|---|---|---|---|")
-for label, r in runs[1:]:
+for label, r in runs[1:3]:
     added = sum(z for k, (_, z) in outs[r].items() if k.startswith("/looming/"))
     print(f"| {label} | {added / 1e6:.0f} | {added / lidar:.3f} | {(lidar + added) / lidar:.2f} |")
 print()
@@ -211,9 +213,10 @@ measure_resolution() {
   stat -c %s "$dir/copy.mcap" > "$dir/copy.bytes"
   [ "$keep" = 1 ] || rm -f "$dir/copy.mcap"
 
-  for run in process full; do
+  for run in process full coarse; do
     fields=()
     [ "$run" = full ] && fields=(--fields full)
+    [ "$run" = coarse ] && fields=(--firings-per-column 2)
     log "looming process ${fields[*]:-}"
     measure "$run" "$looming" process "$input" -o "$dir/$run.mcap" --force -q \
       --json-summary "$dir/$run.json" "${fields[@]}"
@@ -282,7 +285,7 @@ for resolution in ${BENCH_RESOLUTIONS:-32x512 64x2048}; do
   measure_resolution "${resolution%x*}" "${resolution#*x}"
   cat "$rdir/bench-table.md" >> "$dir/bench-table.md"
   echo >> "$dir/bench-table.md"
-  for r in process full; do
+  for r in process full coarse; do
     python3 - "$rdir/$r.json" "$r" <<'PY' >&2
 import json, sys
 s = json.load(open(sys.argv[1]))
