@@ -25,8 +25,10 @@ pub(super) fn fill_dropouts(
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
     let mut bridged_row = vec![false; rows];
     let sparse = !vertices.normal.is_empty();
-    for (row, bridged) in bridged_row.iter_mut().enumerate() {
-        for col in 0..cols {
+    // Column by column, as the vertices are stored (each row still left to
+    // right: a bridged vertex may be the left end of the next bridge).
+    for col in 0..cols {
+        for (row, bridged) in bridged_row.iter_mut().enumerate() {
             let cell = row * cols + col;
             let at = col * rows + row;
             if vertices.at[at].is_some() || source.surfaces.range_m[cell].is_finite() {

@@ -23,7 +23,7 @@ use crate::model::StampNs;
 use mesh::fill_dropouts;
 pub(super) use mesh::mesh_joins;
 use moved_vertices::{TransformCache, arrival_poses, warp_vertex};
-use raster::{rasterize_ring, rasterize_row};
+use raster::{rasterize_columns, rasterize_ring};
 
 /// One scan's surface, ready to be warped.
 pub(crate) struct Source<'a> {
@@ -187,17 +187,7 @@ pub fn render(
             .for_each(|(col, column)| warp_column(col, column, &mut []));
     }
     let proxy = fill_dropouts(source, geometry, &mut vertices);
-    let candidates: Vec<Vec<Candidate>> = if sparse {
-        (0..geometry.rows)
-            .into_par_iter()
-            .map(|row| rasterize_ring(source, target, geometry, &vertices, &proxy.cell, row))
-            .collect()
-    } else {
-        (0..geometry.rows.saturating_sub(1))
-            .into_par_iter()
-            .map(|row| rasterize_row(source, target, geometry, &vertices, &proxy, row))
-            .collect()
-    };
+    let candidates = rasterize(source, target, geometry, &vertices, &proxy);
     let mut range_m = vec![f32::NAN; cells];
     let mut source_time_ns = vec![0; cells];
     let mut normal = vec![[0.0; 3]; cells];
@@ -220,6 +210,37 @@ pub fn render(
         edge,
     }
 }
+
+/// Every triangle (or, on a sparse sensor, ring segment) of the moved
+/// mesh rasterised: the candidates of each task, in the z-buffer's order.
+fn rasterize(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    vertices: &Vertices,
+    proxies: &mesh::Proxies,
+) -> Vec<Vec<Candidate>> {
+    if geometry.sparse_rows() {
+        (0..geometry.rows)
+            .into_par_iter()
+            .map(|row| rasterize_ring(source, target, geometry, vertices, &proxies.cell, row))
+            .collect()
+    } else {
+        let cols = geometry.cols;
+        (0..cols.div_ceil(CHUNK_COLS))
+            .into_par_iter()
+            .map(|chunk| {
+                let columns = chunk * CHUNK_COLS..((chunk + 1) * CHUNK_COLS).min(cols);
+                rasterize_columns(source, target, geometry, vertices, proxies, columns)
+            })
+            .collect()
+    }
+}
+
+/// Source columns rasterised by one task: the z-buffer takes their
+/// candidates in turn, so this sets which of two equal ranges wins (the
+/// first column's).
+const CHUNK_COLS: usize = 64;
 
 /// A triangle covering a target ray.
 struct Candidate {

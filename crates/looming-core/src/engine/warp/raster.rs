@@ -13,55 +13,85 @@ use super::{Candidate, REACH_SLACK, Source, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
 use crate::model::StampNs;
 
-/// The triangles between source rows `row` and `row + 1`, rasterised.
-pub(super) fn rasterize_row(
+/// The triangles of the quads whose top-left vertex lies in source columns
+/// `columns`, rasterised column by column (the vertices are stored
+/// column-major: a column's quads read consecutive vertices, where a row's
+/// read one vertex pair per column of the whole buffer).
+pub(super) fn rasterize_columns(
     source: &Source,
     target: &Target,
     geometry: &ImageGeometry,
     vertices: &Vertices,
     proxies: &Proxies,
-    row: usize,
+    columns: std::ops::Range<usize>,
 ) -> Vec<Candidate> {
-    let cols = geometry.cols;
+    let rows = geometry.rows;
     // About one candidate per quad: room for all without regrowing.
-    let mut out = Vec::with_capacity(cols + cols / 2);
-    let joins = &source.surfaces.joins;
+    let quads = columns.len() * rows.saturating_sub(1);
+    let mut out = Vec::with_capacity(quads + quads / 2);
     // Where neither row bridged a dropout, every vertex stands for its own
     // cell and the scan's table of triangles holds.
-    let own = !proxies.bridged_row[row] && !proxies.bridged_row[row + 1];
-    for col in 0..cols {
-        let a = row * cols + col;
-        if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == 0 {
-            continue;
-        }
-        let next = if col + 1 == cols { 0 } else { col + 1 };
-        // Either triangle needs the diagonal's two vertices.
-        let (Some(vb), Some(vc)) = (vertices.get(row, next), vertices.get(row + 1, col)) else {
-            continue;
-        };
-        let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
-        // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
-        let quad = if own {
-            let bits = joins[a];
-            [
-                va.filter(|_| bits & QUAD_FIRST != 0)
-                    .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
-                vd.filter(|_| bits & QUAD_SECOND != 0)
-                    .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
-            ]
-        } else {
-            bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
-        };
-        if (quad[0].is_none() && quad[1].is_none())
-            || rasterize_quad(target, geometry, quad, &mut out)
-        {
-            continue;
-        }
-        for (corners, edge) in quad.into_iter().flatten() {
-            rasterize_triangle(target, geometry, corners, edge, &mut out);
+    let own: Vec<bool> = (0..rows.saturating_sub(1))
+        .map(|row| !proxies.bridged_row[row] && !proxies.bridged_row[row + 1])
+        .collect();
+    for col in columns {
+        for (row, &own) in own.iter().enumerate() {
+            rasterize_quad_at(
+                source,
+                target,
+                geometry,
+                (vertices, proxies),
+                (row, col),
+                own,
+                &mut out,
+            );
         }
     }
     out
+}
+
+/// The quad at source (`row`, `col`) rasterised into `out`; `own` where
+/// neither of its rows bridged a dropout.
+#[inline]
+fn rasterize_quad_at(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    (vertices, proxies): (&Vertices, &Proxies),
+    (row, col): (usize, usize),
+    own: bool,
+    out: &mut Vec<Candidate>,
+) {
+    let cols = geometry.cols;
+    let joins = &source.surfaces.joins;
+    let a = row * cols + col;
+    if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == 0 {
+        return;
+    }
+    let next = if col + 1 == cols { 0 } else { col + 1 };
+    // Either triangle needs the diagonal's two vertices.
+    let (Some(vb), Some(vc)) = (vertices.get(row, next), vertices.get(row + 1, col)) else {
+        return;
+    };
+    let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
+    // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
+    let quad = if own {
+        let bits = joins[a];
+        [
+            va.filter(|_| bits & QUAD_FIRST != 0)
+                .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
+            vd.filter(|_| bits & QUAD_SECOND != 0)
+                .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
+        ]
+    } else {
+        bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
+    };
+    if (quad[0].is_none() && quad[1].is_none()) || rasterize_quad(target, geometry, quad, out) {
+        return;
+    }
+    for (corners, edge) in quad.into_iter().flatten() {
+        rasterize_triangle(target, geometry, corners, edge, out);
+    }
 }
 
 /// A quad's triangles, each with whether it touches an occlusion edge,
@@ -233,8 +263,13 @@ fn rasterize_quad(
     }
     // Away from the seam, every column lies within a quarter turn of every
     // other: unwrapping leaves them as they are, and the box's columns need
-    // no wrapping.
-    if !(c_min - col_reach >= 1.0 && c_max + col_reach <= cols - 2.0 && c_max - c_min <= cols / 4.0)
+    // no wrapping. Nor do the coordinates of the box's rays (within a reach
+    // of their columns, so between 0 and `cols`, and within half a turn of
+    // the triangle's columns): they are taken as they are.
+    if !(c_min - 2.0 * col_reach >= 1.0
+        && c_max + 2.0 * col_reach <= cols - 2.0
+        && c_max - c_min <= cols / 4.0
+        && col_reach <= cols / 16.0)
     {
         return false;
     }
@@ -260,7 +295,7 @@ fn rasterize_quad(
                 let Some(triangle) = triangle else {
                     continue;
                 };
-                let w = triangle.weights(tr, unwrap_near(tc, triangle.c0, geometry.cols));
+                let w = triangle.weights(tr, tc);
                 if let Some(w) = w
                     && let Some(hit) = hit(target, cell, triangle.v, w, triangle.edge, plane)
                 {
@@ -272,30 +307,42 @@ fn rasterize_quad(
     true
 }
 
-/// A triangle away from the seam, set up for the barycentric tests: the
-/// differences [`barycentric`] takes of its coordinates, taken once.
+/// A triangle set up for the barycentric tests: the differences of its
+/// coordinates the weights take, taken once, with the sign of its
+/// orientation, so that a ray is tested without the division (only the
+/// rays inside, about one a triangle in two, take it).
 struct FlatTriangle<'v> {
     v: [&'v Vertex; 3],
-    /// Its first column, to unwrap the rays' next to.
-    c0: f64,
     /// Its third vertex's row and column.
     r2: f64,
     c2: f64,
-    /// `[r1 - r2, c2 - c1, r2 - r0, c0 - c2]`.
+    /// `[r1 - r2, c2 - c1, r2 - r0, c0 - c2]`, times the sign of the
+    /// denominator.
     steps: [f64; 4],
-    inverse_denominator: f64,
+    /// `|(r1 - r2)(c0 - c2) + (c2 - c1)(r0 - r2)|`, twice the area.
+    denominator: f64,
+    /// How far outside, in the weights' units times `denominator`, a ray
+    /// still counts as inside.
+    tolerance: f64,
     edge: bool,
 }
 
 impl<'v> FlatTriangle<'v> {
-    /// `None` for a triangle [`rasterize_triangle`] skips: wider than
-    /// [`MAX_SPAN_CELLS`] (a bridge) or degenerate.
+    /// The triangle at its vertices' own coordinates (away from the seam).
     #[inline]
     fn set_up(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
         let (r, c) = (
             [v[0].row, v[1].row, v[2].row],
             [v[0].col, v[1].col, v[2].col],
         );
+        Self::at(v, (&r, &c), edge)
+    }
+
+    /// `None` for a triangle the renderer skips: wider than
+    /// [`MAX_SPAN_CELLS`] (a bridge) or degenerate. Rows `r` and
+    /// (unwrapped) columns `c` of vertices `v`.
+    #[inline]
+    fn at(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
         let (r_min, r_max) = (r[0].min(r[1]).min(r[2]), r[0].max(r[1]).max(r[2]));
         let (c_min, c_max) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
         if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
@@ -305,56 +352,42 @@ impl<'v> FlatTriangle<'v> {
         if denominator.abs() < 1e-12 {
             return None;
         }
+        let sign = if denominator < 0.0 { -1.0 } else { 1.0 };
         Some(Self {
             v,
-            c0: c[0],
             r2: r[2],
             c2: c[2],
-            steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]],
-            inverse_denominator: 1.0 / denominator,
+            steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
+            denominator: denominator.abs(),
+            tolerance: EDGE_WEIGHT * denominator.abs(),
             edge,
         })
     }
 
-    /// [`barycentric`]'s weights, the same operations on the same values,
-    /// the first tested before the second is computed.
+    /// The barycentric weights of `(tr, tc)`, where it lies inside (to
+    /// [`EDGE_WEIGHT`]), the first tested before the second is computed.
     #[inline]
     fn weights(&self, tr: f64, tc: f64) -> Option<[f64; 3]> {
-        const EDGE: f64 = -1e-9;
         let (dc, dr) = (tc - self.c2, tr - self.r2);
         let [k0, k1, k2, k3] = self.steps;
-        let w0 = (k0 * dc + k1 * dr) * self.inverse_denominator;
-        if w0 < EDGE {
+        let s0 = k0 * dc + k1 * dr;
+        if s0 < -self.tolerance {
             return None;
         }
-        let w1 = (k2 * dc + k3 * dr) * self.inverse_denominator;
-        let w2 = 1.0 - w0 - w1;
-        if w1 < EDGE || w2 < EDGE {
+        let s1 = k2 * dc + k3 * dr;
+        let s2 = self.denominator - s0 - s1;
+        if s1 < -self.tolerance || s2 < -self.tolerance {
             return None;
         }
-        Some([w0, w1, w2])
+        let inverse = 1.0 / self.denominator;
+        let (w0, w1) = (s0 * inverse, s1 * inverse);
+        Some([w0, w1, 1.0 - w0 - w1])
     }
 }
 
-/// The barycentric weights of `(tr, tc)` in the triangle with rows `r` and
-/// columns `c`, where it lies inside (to a tolerance).
-#[inline]
-fn barycentric(
-    r: &[f64; 3],
-    c: &[f64; 3],
-    inverse_denominator: f64,
-    tr: f64,
-    tc: f64,
-) -> Option<[f64; 3]> {
-    let w0 = ((r[1] - r[2]) * (tc - c[2]) + (c[2] - c[1]) * (tr - r[2])) * inverse_denominator;
-    let w1 = ((r[2] - r[0]) * (tc - c[2]) + (c[0] - c[2]) * (tr - r[2])) * inverse_denominator;
-    let w2 = 1.0 - w0 - w1;
-    const EDGE: f64 = -1e-9;
-    if w0 < EDGE || w1 < EDGE || w2 < EDGE {
-        return None;
-    }
-    Some([w0, w1, w2])
-}
+/// How far outside a triangle, in barycentric weight, a ray is still taken
+/// as inside (so that a ray on the edge two triangles share is in both).
+const EDGE_WEIGHT: f64 = 1e-9;
 
 /// The candidate of target `cell`, whose ray falls inside triangle `v`
 /// with barycentric weights `w`: the range where it meets the triangle's
@@ -428,11 +461,9 @@ fn rasterize_triangle(
     else {
         return;
     };
-    let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
-    if denominator.abs() < 1e-12 {
+    let Some(triangle) = FlatTriangle::at(v, (&r, &c), edge) else {
         return;
-    }
-    let inverse_denominator = 1.0 / denominator;
+    };
     let mut plane = None;
     let cols_i = geometry.cols as i64;
     for row in row_lo..=row_hi {
@@ -445,7 +476,7 @@ fn rasterize_triangle(
             let (tr, tc) = target.coords[cell];
             // Bring the target's column next to the triangle's.
             let tc = unwrap_near(f64::from(tc), c[0], geometry.cols);
-            let Some(w) = barycentric(&r, &c, inverse_denominator, f64::from(tr), tc) else {
+            let Some(w) = triangle.weights(f64::from(tr), tc) else {
                 continue;
             };
             if let Some(hit) = hit(target, cell, v, w, edge, &mut plane) {
