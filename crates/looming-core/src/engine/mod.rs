@@ -24,6 +24,7 @@
 //! per-cell math in `cells.rs`, the motion estimated from the scans in
 //! `egomotion.rs`.
 
+pub(crate) mod atan;
 pub mod beams;
 mod bias;
 mod cells;
