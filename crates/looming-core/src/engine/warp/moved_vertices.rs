@@ -229,7 +229,9 @@ fn slight_turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
 /// by its Taylor series where the turn is small (the common case: a
 /// return moves a few degrees between scans), which is cheaper than
 /// `atan2` and as exact for the image (the series' remainder is below
-/// 4e-15 rad, a millionth of a millionth of a column).
+/// 4e-15 rad, a millionth of a millionth of a column); beyond its reach
+/// (near returns of the ego render) the engine's `atan2`, within 1e-12 rad
+/// of libm's and a third of its cost.
 fn turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
     let (cross, dot) = (ax * by - ay * bx, ax * bx + ay * by);
     if dot > 0.0 && cross.abs() <= SMALL_TURN_TAN * dot {
@@ -251,7 +253,7 @@ fn turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
             .fold(0.0, |sum, &c| c + v2 * sum);
         u * (even + v * odd)
     } else {
-        cross.atan2(dot)
+        crate::engine::atan::atan2(cross, dot)
     }
 }
 
@@ -361,9 +363,16 @@ mod tests {
             let a = (from.cos() * length, from.sin() * length);
             let b = ((from + by).cos() * 2.0, (from + by).sin() * 2.0);
             let exact = (a.0 * b.1 - a.1 * b.0).atan2(a.0 * b.0 + a.1 * b.1);
-            worst = worst.max((turn_rad(a, b) - exact).abs());
+            let tolerance = if by.abs() < SMALL_TURN_TAN.atan() {
+                4e-15
+            } else {
+                1e-12
+            };
+            worst = worst.max((turn_rad(a, b) - exact).abs() / tolerance);
         }
-        assert!(worst <= 4e-15, "worst difference {worst:e} rad");
+        // Within the series' 4e-15 rad where it applies, the engine's
+        // atan2's 1e-12 beyond.
+        assert!(worst <= 1.0, "worst difference {worst} of the tolerance");
     }
 
     #[test]
