@@ -7,8 +7,8 @@ pub struct EngineConfig {
     pub columns: Option<usize>,
     /// Firings of a beam per range-image column where `columns` is unset:
     /// 1 gives every firing its own cell (the default, the finest image);
-    /// 2 halves the columns, and about halves the engine's time, for a
-    /// coarser looming image (each cell keeps its nearest return; the other
+    /// 2 halves the columns, and takes a quarter to two fifths less CPU
+    /// (a 64 x 2048 drive, the KITTI braking log), for a noisier looming image (each cell keeps its nearest return; the other
     /// takes the cell's values where it is the same surface).
     #[serde(default = "one_firing_per_column")]
     pub firings_per_column: usize,
