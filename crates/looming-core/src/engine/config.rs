@@ -7,9 +7,10 @@ pub struct EngineConfig {
     pub columns: Option<usize>,
     /// Firings of a beam per range-image column where `columns` is unset:
     /// 1 gives every firing its own cell (the default, the finest image);
-    /// 2 halves the columns, and takes a quarter to two fifths less CPU
-    /// (a 64 x 2048 drive, the KITTI braking log), for a noisier looming image (each cell keeps its nearest return; the other
-    /// takes the cell's values where it is the same surface).
+    /// 2 halves the columns and takes a quarter to two fifths less CPU (a
+    /// 64 x 2048 drive, the KITTI braking log) for a noisier looming image:
+    /// each cell keeps its nearest return, and the other takes the cell's
+    /// values where it is the same surface.
     #[serde(default = "one_firing_per_column")]
     pub firings_per_column: usize,
     /// Range noise of the sensor (1 sigma), metres.
