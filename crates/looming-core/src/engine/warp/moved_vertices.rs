@@ -6,7 +6,6 @@
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
-use std::f64::consts::{PI, TAU};
 
 use super::{Source, Target, Vertex};
 use crate::engine::grid::ImageGeometry;
@@ -153,7 +152,7 @@ pub(super) fn warp_vertex(
     // The moved return's angles: the source return's, turned by the motion.
     let mut azimuth =
         source.surfaces.azimuth_rad[cell] + turn_rad((point.x, point.y), (moved.x, moved.y));
-    let col = col_of(geometry.cols, azimuth);
+    let col = geometry.col_of(azimuth);
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
         // A return that lands across the seam of the sweep would be compared
@@ -188,26 +187,9 @@ pub(super) fn warp_vertex(
             (level_squared + moved.z * moved.z).sqrt(),
             cell / geometry.cols,
         ),
-        col: col_f(geometry.cols, azimuth),
+        col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })
-}
-
-/// [`ImageGeometry::col_f`] with the turn's reciprocal multiplied instead
-/// of divided by (within an ulp of it): a division was a sixth of the
-/// vertex's time, in its chain of dependent steps.
-#[inline]
-fn col_f(cols: usize, azimuth_rad: f64) -> f64 {
-    let turns = (PI - azimuth_rad) * (1.0 / TAU);
-    (turns - turns.floor()) * cols as f64
-}
-
-/// [`ImageGeometry::col_of`] through [`col_f`].
-#[inline]
-fn col_of(cols: usize, azimuth_rad: f64) -> usize {
-    // Through `i64`: `as usize` saturates with a longer sequence.
-    let col = (col_f(cols, azimuth_rad) + 0.5) as i64 as usize;
-    if col >= cols { col - cols } else { col }
 }
 
 /// [`turn_rad`] for a turn of a few milliradians (a column's time
