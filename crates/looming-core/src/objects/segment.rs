@@ -132,23 +132,31 @@ fn neighbours(
 /// of its own that a newly uncovered stretch of wall left without any
 /// measured cell. A dense sensor's neighbours lie a fraction of a degree
 /// apart, where the fixed gap rules to 80 m.
+///
+/// Without a square root or a division, from the squared lengths, the dot
+/// product and the squared cross product of the two returns (`d1 d2
+/// sin(alpha) = |a x b|`, `d1 (d1 - d2 cos(alpha)) = d1^2 - a . b`): this
+/// runs for every pair of neighbours, six per cell of every object.
 fn joined(a: &[f64; 3], b: &[f64; 3], min_sin_beta: f64, config: &ObjectConfig) -> bool {
-    let gap = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
-    let ra = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    let rb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
-    let (d1, d2) = if ra >= rb { (ra, rb) } else { (rb, ra) };
-    let cos_alpha = ((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (ra * rb)).clamp(-1.0, 1.0);
-    let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
-    if gap > config.max_gap_m.max(RAY_GAP_FACTOR * d2 * sin_alpha) {
+    let dot = |u: &[f64; 3], v: &[f64; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    let gap = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let gap_squared = dot(&gap, &gap);
+    let (ra_squared, rb_squared, ab) = (dot(a, a), dot(b, b), dot(a, b));
+    let d1_squared = ra_squared.max(rb_squared);
+    // |a x b|^2, from Lagrange's identity.
+    let cross_squared = (ra_squared * rb_squared - ab * ab).max(0.0);
+    // gap > max(max_gap, RAY_GAP_FACTOR d2 sin(alpha)), d2 sin(alpha) = |a x b| / d1.
+    if gap_squared > config.max_gap_m * config.max_gap_m
+        && gap_squared * d1_squared > RAY_GAP_FACTOR * RAY_GAP_FACTOR * cross_squared
+    {
         return false;
     }
-    // sin(beta) of the triangle: the line a-b against the farther ray.
-    let along = d1 - d2 * cos_alpha;
-    let across = d2 * sin_alpha;
-    // `sqrt` of the squares, not libm's `hypot` (whose overflow guards a
-    // range in metres never needs): this runs for every pair of neighbours.
-    let hypot = (along * along + across * across).sqrt();
-    hypot <= 1e-9 || across / hypot >= min_sin_beta
+    // sin(beta) of the triangle, the line a-b against the farther ray:
+    // `across / hypot(along, across)`, both sides times d1.
+    let along = d1_squared - ab;
+    let hypot_squared = along * along + cross_squared;
+    hypot_squared <= 1e-18 * d1_squared
+        || cross_squared >= min_sin_beta * min_sin_beta * hypot_squared
 }
 
 /// A surface facing the sensor leaves `range x sin(alpha)` between rays
@@ -163,6 +171,77 @@ mod tests {
     fn ray_point(range_m: f64, elevation_deg: f64) -> [f64; 3] {
         let e = elevation_deg.to_radians();
         [range_m * e.cos(), 0.0, range_m * e.sin()]
+    }
+
+    /// The criterion as first written, with square roots and divisions.
+    fn joined_by_angles(
+        a: &[f64; 3],
+        b: &[f64; 3],
+        min_sin_beta: f64,
+        config: &ObjectConfig,
+    ) -> bool {
+        let gap = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+        let ra = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        let rb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+        let (d1, d2) = if ra >= rb { (ra, rb) } else { (rb, ra) };
+        let cos_alpha = ((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (ra * rb)).clamp(-1.0, 1.0);
+        let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
+        if gap > config.max_gap_m.max(RAY_GAP_FACTOR * d2 * sin_alpha) {
+            return false;
+        }
+        let along = d1 - d2 * cos_alpha;
+        let across = d2 * sin_alpha;
+        let hypot = (along * along + across * across).sqrt();
+        hypot <= 1e-9 || across / hypot >= min_sin_beta
+    }
+
+    /// Neighbouring returns of dense and sparse sensors, near and far, on
+    /// surfaces at every slope: the same verdict as the angles give.
+    #[test]
+    fn the_criterion_without_roots_gives_the_angles_verdict() {
+        let config = ObjectConfig::default();
+        let min_sin_beta = config.join_angle_deg.to_radians().sin();
+        let mut state = 99u64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut joined_count, mut pairs) = (0, 200_000);
+        for _ in 0..pairs {
+            let (azimuth, elevation) = (uniform() * 6.3, uniform() * 0.6 - 0.3);
+            let apart = [0.003, 0.03, 0.2][(uniform() * 3.0) as usize];
+            let range = 0.5 + uniform() * 90.0;
+            let step =
+                range * (uniform() * 2.0 - 1.0) * [0.001, 0.05, 0.5][(uniform() * 3.0) as usize];
+            let point = |r: f64, az: f64, el: f64| {
+                [
+                    r * el.cos() * az.cos(),
+                    r * el.cos() * az.sin(),
+                    r * el.sin(),
+                ]
+            };
+            let a = point(range, azimuth, elevation);
+            let b = point(
+                range + step,
+                azimuth + apart * uniform(),
+                elevation + apart * uniform(),
+            );
+            let expected = joined_by_angles(&a, &b, min_sin_beta, &config);
+            assert_eq!(
+                joined(&a, &b, min_sin_beta, &config),
+                expected,
+                "{a:?} {b:?}"
+            );
+            joined_count += usize::from(expected);
+        }
+        // Both verdicts are exercised.
+        pairs -= joined_count;
+        assert!(
+            joined_count > 20_000 && pairs > 20_000,
+            "{joined_count} joined, {pairs} not"
+        );
     }
 
     #[test]
