@@ -316,7 +316,16 @@ fn describe(
         .iter()
         .map(|&c| f64::from(looming.image.range_m[c]))
         .collect();
-    ranges.sort_unstable_by(f64::total_cmp);
+    // The median and the tenth percentile by selection (a cluster of a car
+    // close ahead holds thousands of cells): the tenth lies in the part
+    // below the median.
+    let (middle, tenth) = (ranges.len() / 2, ranges.len() / 10);
+    let (below, &mut range_m, _) = ranges.select_nth_unstable_by(middle, f64::total_cmp);
+    let near_range_m = if tenth < middle {
+        *below.select_nth_unstable_by(tenth, f64::total_cmp).1
+    } else {
+        range_m
+    };
     let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
     let centroid = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
     let object = objects.and_then(|o| dominant_object(o, cells));
@@ -343,8 +352,8 @@ fn describe(
         cols: ColSpan::covering(&occupied, cols),
         looming_per_s,
         centroid_m: [centroid.x, centroid.y, centroid.z],
-        range_m: ranges[ranges.len() / 2],
-        near_range_m: ranges[ranges.len() / 10],
+        range_m,
+        near_range_m,
         lateral_offset_m,
         object_id: object.map(|(objects, index)| objects.objects[index].id),
         moving_cells: cells.iter().filter(|&&c| looming.moving[c]).count(),
@@ -380,17 +389,6 @@ fn object_offset_m(
     (corridor, horizon_s): (&Corridor, f64),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> f64 {
-    // The returns by their distance from the path now, nearest first: the
-    // distance from the path moves by at most the shift (it is a distance
-    // to a curve), so a shifted return need only be looked at while its
-    // distance now, less the shift, could beat the nearest found.
-    let mut returns: Vec<(f64, Vector3<f64>)> = cells
-        .iter()
-        .filter_map(|&cell| position(cell))
-        .map(|p| (corridor.offset_m(&p), p))
-        .collect();
-    returns.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    let now = returns.first().map_or(f64::INFINITY, |r| r.0);
     let object = &objects.objects[index];
     let velocity = object
         .velocity_mps
@@ -398,9 +396,23 @@ fn object_offset_m(
         .filter(|v| agrees_with_disagreement(object, v))
         .map(|v| Vector3::new(v.x, v.y, 0.0))
         .filter(|v| v.norm() >= MIN_PREDICTED_SPEED_MPS);
+    let offsets = cells
+        .iter()
+        .filter_map(|&cell| position(cell))
+        .map(|p| (corridor.offset_m(&p), p));
     let Some(velocity) = velocity else {
-        return now;
+        // Not moving on its own: its distance now (no order needed).
+        return offsets
+            .map(|(offset, _)| offset)
+            .fold(f64::INFINITY, f64::min);
     };
+    // The returns by their distance from the path now, nearest first: the
+    // distance from the path moves by at most the shift (it is a distance
+    // to a curve), so a shifted return need only be looked at while its
+    // distance now, less the shift, could beat the nearest found.
+    let mut returns: Vec<(f64, Vector3<f64>)> = offsets.collect();
+    returns.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let now = returns.first().map_or(f64::INFINITY, |r| r.0);
     let steps = (horizon_s / PREDICTION_STEP_S).ceil() as usize;
     let mut nearest = now;
     for k in 1..=steps {

@@ -69,7 +69,11 @@ impl Corridor {
         let left = -p.x * sin + p.y * cos;
         let k = self.curvature_per_m;
         if k.abs() < 1e-9 {
-            return (along - along.clamp(-REACH_M, REACH_M)).hypot(left);
+            // `sqrt` of the squares, not libm's `hypot` (whose overflow
+            // guards metres never need): this runs for every return of a
+            // hot cluster's object.
+            let beyond = along - along.clamp(-REACH_M, REACH_M);
+            return (beyond * beyond + left * left).sqrt();
         }
         // The circle's centre is at (0, 1/k); the path point at arc length s
         // is (sin(ks)/k, (1 - cos(ks))/k).
