@@ -520,27 +520,44 @@ fn median_3x3(values: impl Iterator<Item = f32>) -> Option<f32> {
     (count > 0).then(|| median_of(&window[..count]))
 }
 
-/// The middle (upper middle) value of a non-empty slice of at most a few
-/// values in `f32::total_cmp`'s order, by insertion sort of the values'
-/// total-order keys: for nine values a few dozen integer comparisons, where
-/// the general selection's setup costs more than the sort.
+/// The middle (upper middle) value of a non-empty slice of at most nine
+/// values in `f32::total_cmp`'s order: their total-order keys, padded to
+/// nine with the largest key, through a sorting network of min and max
+/// ([`sort_nine`]), which has no branch to mispredict (an insertion sort's
+/// comparisons on noisy values were a third of the per-cell stage); the
+/// padding sorts last, so the middle of the values is the key at
+/// `count / 2`.
 fn median_of(values: &[f32]) -> f32 {
-    let count = values.len();
-    let mut keys = [0i32; 9];
-    let keys = &mut keys[..count];
-    for (key, &value) in keys.iter_mut().zip(values.iter()) {
+    debug_assert!(!values.is_empty() && values.len() <= 9);
+    let mut keys = [i32::MAX; 9];
+    for (key, &value) in keys.iter_mut().zip(values) {
         *key = total_order_key(value);
     }
-    for i in 1..count {
-        let key = keys[i];
-        let mut j = i;
-        while j > 0 && keys[j - 1] > key {
-            keys[j] = keys[j - 1];
-            j -= 1;
+    sort_nine(&mut keys);
+    from_total_order_key(keys[values.len() / 2])
+}
+
+/// Sorts nine keys with a 25-comparator network of seven layers
+/// (Dobbelaere's list of sorting networks; checked on every 0-1 input,
+/// which by the 0-1 principle sorts every input).
+#[inline]
+fn sort_nine(keys: &mut [i32; 9]) {
+    const LAYERS: [&[(usize, usize)]; 7] = [
+        &[(0, 3), (1, 7), (2, 5), (4, 8)],
+        &[(0, 7), (2, 4), (3, 8), (5, 6)],
+        &[(0, 2), (1, 3), (4, 5), (7, 8)],
+        &[(1, 4), (3, 6), (5, 7)],
+        &[(0, 1), (2, 4), (3, 5), (6, 8)],
+        &[(2, 3), (4, 5), (6, 7)],
+        &[(1, 2), (3, 4), (5, 6)],
+    ];
+    for layer in LAYERS {
+        for &(i, j) in layer {
+            let (a, b) = (keys[i], keys[j]);
+            keys[i] = a.min(b);
+            keys[j] = a.max(b);
         }
-        keys[j] = key;
     }
-    from_total_order_key(keys[count / 2])
 }
 
 /// An `f32`'s bits as an integer that orders as `f32::total_cmp` does
@@ -606,6 +623,20 @@ fn fuse(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// By the 0-1 principle a comparator network that sorts every input of
+    /// zeros and ones sorts every input.
+    #[test]
+    fn the_nine_key_network_sorts_every_zero_one_input() {
+        for bits in 0u32..512 {
+            let mut keys: [i32; 9] = std::array::from_fn(|k| ((bits >> k) & 1) as i32);
+            sort_nine(&mut keys);
+            assert!(
+                keys.windows(2).all(|w| w[0] <= w[1]),
+                "{bits:09b}: {keys:?}"
+            );
+        }
+    }
 
     #[test]
     fn the_3x3_median_is_the_total_orders_middle() {
