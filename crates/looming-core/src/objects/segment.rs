@@ -201,13 +201,8 @@ mod tests {
     fn the_criterion_without_roots_gives_the_angles_verdict() {
         let config = ObjectConfig::default();
         let min_sin_beta = config.join_angle_deg.to_radians().sin();
-        let mut state = 99u64;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::test_rng::SplitMix64(99);
+        let mut uniform = || rng.uniform(0.0, 1.0);
         let (mut joined_count, mut pairs) = (0, 200_000);
         for _ in 0..pairs {
             let (azimuth, elevation) = (uniform() * 6.3, uniform() * 0.6 - 0.3);
