@@ -168,9 +168,10 @@ fn solve(
         if w > 0.5 {
             inliers += 1;
         }
-        normal += eq.jacobian * eq.jacobian.transpose() * w;
+        add_weighted_outer_upper(&mut normal, &eq.jacobian, w);
         rhs += eq.jacobian * (misfit_m * w);
     }
+    mirror_upper(&mut normal);
     // Damping: the motion along directions no surface constrains (a
     // corridor of road and side walls says nothing of forward motion) stays
     // at the trial value instead of wandering; a measured quantity is only
@@ -202,6 +203,28 @@ fn solve(
         residual_m: scale,
         covariance,
     })
+}
+
+/// `normal += j j^T w` on and above the diagonal only (21 of the 36
+/// entries; [`mirror_upper`] fills the rest once all equations are in):
+/// each entry the same `(j_i j_k) w` the full product takes, so the sums
+/// are the same to the bit.
+#[inline]
+fn add_weighted_outer_upper(normal: &mut Matrix6<f64>, j: &Vector6<f64>, w: f64) {
+    for k in 0..6 {
+        for i in 0..=k {
+            normal[(i, k)] += j[i] * j[k] * w;
+        }
+    }
+}
+
+/// Copies the entries above the diagonal to below it.
+fn mirror_upper(normal: &mut Matrix6<f64>) {
+    for k in 0..6 {
+        for i in 0..k {
+            normal[(k, i)] = normal[(i, k)];
+        }
+    }
 }
 
 /// The sandwich covariance of the weighted least-squares `solution`, each
