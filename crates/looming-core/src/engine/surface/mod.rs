@@ -11,6 +11,7 @@
 mod noise;
 mod plane;
 mod ring;
+mod spare;
 mod window;
 
 use nalgebra::Vector3;
@@ -147,6 +148,7 @@ impl Surfaces {
         };
         let mut surfaces = Self::empty(geometry.cells(), geometry.cols);
         surfaces.write_fits(&returns, geometry, params, &noise_m_per_row);
+        returns.recycle();
         surfaces.noise_m_per_row = noise_m_per_row;
         surfaces.range_bias_m_per_row = range_bias_m_per_row;
         surfaces.joins = super::warp::mesh_joins(&surfaces, geometry.rows, geometry.cols);
@@ -290,7 +292,8 @@ impl<'a> Returns<'a> {
         range_bias_m: &[f32],
         window_half_cols: &[usize],
     ) -> Self {
-        let points: Vec<Vector3<f64>> = image
+        let mut spare = spare::take();
+        image
             .point
             .par_iter()
             .enumerate()
@@ -308,20 +311,38 @@ impl<'a> Returns<'a> {
                     _ => p,
                 }
             })
-            .collect();
-        Self::of_points(image, points, cols, window_half_cols)
+            .collect_into_vec(&mut spare.points);
+        Self::of_points_in(image, cols, window_half_cols, spare)
     }
 
     /// The returns `points` (one per cell of `image`; NaN empty).
+    #[cfg(test)]
     fn of_points(
         image: &'a RangeImage,
         points: Vec<Vector3<f64>>,
         cols: usize,
         window_half_cols: &[usize],
     ) -> Self {
-        let ranges: Vec<f64> = points.iter().map(|p| p.norm()).collect();
-        let sums = RowSums::new(&points, cols);
-        let extremes = RowExtremes::new(&ranges, cols, window_half_cols);
+        let spare = spare::Spare {
+            points,
+            ..Default::default()
+        };
+        Self::of_points_in(image, cols, window_half_cols, spare)
+    }
+
+    /// The returns `spare.points`, the rest in `spare`'s buffers.
+    fn of_points_in(
+        image: &'a RangeImage,
+        cols: usize,
+        window_half_cols: &[usize],
+        spare: spare::Spare,
+    ) -> Self {
+        let points = spare.points;
+        let mut ranges = spare.ranges;
+        ranges.clear();
+        ranges.extend(points.iter().map(|p| p.norm()));
+        let sums = RowSums::new_in(&points, cols, spare.sums);
+        let extremes = RowExtremes::new_in(&ranges, cols, window_half_cols, spare.extremes);
         Self {
             image,
             points,
@@ -329,6 +350,16 @@ impl<'a> Returns<'a> {
             sums,
             extremes,
         }
+    }
+
+    /// Give the buffers back for a later scan's.
+    fn recycle(self) {
+        spare::give(spare::Spare {
+            points: self.points,
+            ranges: self.ranges,
+            sums: self.sums.into_buffer(),
+            extremes: self.extremes.into_buffer(),
+        });
     }
 
     #[inline]
