@@ -199,6 +199,24 @@ mod tests {
     }
 
     #[test]
+    fn extremes_in_an_earlier_scans_buffer_are_the_fresh_extremes() {
+        let cols = 12;
+        let ranges: Vec<f64> = (0..3 * cols)
+            .map(|i| if i % 5 == 1 { f64::NAN } else { 3.0 + i as f64 })
+            .collect();
+        let bits = |e: RowExtremes| -> Vec<[u64; 2]> {
+            e.into_buffer()
+                .iter()
+                .map(|x| x.map(f64::to_bits))
+                .collect()
+        };
+        let fresh = bits(RowExtremes::new(&ranges, cols, &[1, 2]));
+        let earlier = RowExtremes::new(&[7.0; 5 * 12], cols, &[1, 2, 3]).into_buffer();
+        let reused = bits(RowExtremes::new_in(&ranges, cols, &[1, 2], earlier));
+        assert_eq!(reused, fresh);
+    }
+
+    #[test]
     fn rows_all_asks_each_rows_window_in_turn() {
         let (rows, cols) = (3, 12);
         let ranges: Vec<f64> = (0..rows * cols)

@@ -265,6 +265,15 @@ mod tests {
     }
 
     #[test]
+    fn sums_in_an_earlier_scans_buffer_are_the_fresh_sums() {
+        let (rows, cols) = (4, 16);
+        let points = returns_with_gaps(rows, cols);
+        let fresh = RowSums::new(&points, cols).into_buffer();
+        let earlier = RowSums::new(&returns_with_gaps(7, cols), cols).into_buffer();
+        assert_eq!(RowSums::new_in(&points, cols, earlier).into_buffer(), fresh);
+    }
+
+    #[test]
     fn windows_over_rows_are_the_rows_windows_summed_in_order() {
         let (rows, cols) = (4, 16);
         let points = returns_with_gaps(rows, cols);

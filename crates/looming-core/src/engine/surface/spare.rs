@@ -41,3 +41,44 @@ pub(super) fn give(buffers: Spare) {
         spare.push(buffers);
     }
 }
+
+/// The per-cell fields of a dropped [`Surfaces`](super::Surfaces) (6 MB at
+/// 64 x 2048), for the next scan's.
+#[derive(Default)]
+pub(super) struct Fields {
+    pub range_m: Vec<f32>,
+    pub direction: Vec<[f32; 3]>,
+    pub normal: Vec<[f32; 3]>,
+    pub incidence_cos: Vec<f32>,
+    pub support: Vec<u8>,
+    pub edge: Vec<bool>,
+    pub azimuth_rad: Vec<f64>,
+    pub elevation_rad: Vec<f64>,
+}
+
+static SPARE_FIELDS: Mutex<Vec<Fields>> = Mutex::new(Vec::new());
+
+/// Fields given back earlier, or new empty ones.
+pub(super) fn take_fields() -> Fields {
+    SPARE_FIELDS
+        .lock()
+        .ok()
+        .and_then(|mut spare| spare.pop())
+        .unwrap_or_default()
+}
+
+/// Keep `fields` for a later scan's [`take_fields`].
+pub(super) fn give_fields(fields: Fields) {
+    if let Ok(mut spare) = SPARE_FIELDS.lock()
+        && spare.len() < MAX_SPARE
+    {
+        spare.push(fields);
+    }
+}
+
+/// `buffer` cleared and filled with `len` copies of `value`.
+pub(super) fn filled<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {
+    buffer.clear();
+    buffer.resize(len, value);
+    buffer
+}
