@@ -21,7 +21,19 @@ pub(super) struct RowExtremes {
 impl RowExtremes {
     /// Extremes of `ranges` (one per cell, row-major; NaN for an empty
     /// cell) for each of `half_widths` that fits the image.
+    #[cfg(test)]
     pub fn new(ranges: &[f64], cols: usize, half_widths: &[usize]) -> Self {
+        Self::new_in(ranges, cols, half_widths, Vec::new())
+    }
+
+    /// [`Self::new`] in `buffer`'s allocation (`into_buffer` of an earlier
+    /// scan's: fresh pages cost more to fault in than the extremes).
+    pub fn new_in(
+        ranges: &[f64],
+        cols: usize,
+        half_widths: &[usize],
+        buffer: Vec<[f64; 2]>,
+    ) -> Self {
         let mut wanted: Vec<usize> = half_widths
             .iter()
             .copied()
@@ -30,7 +42,9 @@ impl RowExtremes {
         wanted.sort_unstable();
         wanted.dedup();
         let per_row = wanted.len() * cols;
-        let mut extremes = vec![[f64::NAN; 2]; ranges.len() / cols.max(1) * per_row];
+        let mut extremes = buffer;
+        extremes.clear();
+        extremes.resize(ranges.len() / cols.max(1) * per_row, [f64::NAN; 2]);
         if per_row > 0 {
             extremes
                 .par_chunks_mut(per_row)
@@ -42,6 +56,11 @@ impl RowExtremes {
             half_widths: wanted,
             extremes,
         }
+    }
+
+    /// The extremes' allocation, for [`Self::new_in`].
+    pub fn into_buffer(self) -> Vec<[f64; 2]> {
+        self.extremes
     }
 
     /// Whether `within` holds for the `[smallest, largest]` range of each
@@ -177,6 +196,24 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn extremes_in_an_earlier_scans_buffer_are_the_fresh_extremes() {
+        let cols = 12;
+        let ranges: Vec<f64> = (0..3 * cols)
+            .map(|i| if i % 5 == 1 { f64::NAN } else { 3.0 + i as f64 })
+            .collect();
+        let bits = |e: RowExtremes| -> Vec<[u64; 2]> {
+            e.into_buffer()
+                .iter()
+                .map(|x| x.map(f64::to_bits))
+                .collect()
+        };
+        let fresh = bits(RowExtremes::new(&ranges, cols, &[1, 2]));
+        let earlier = RowExtremes::new(&[7.0; 5 * 12], cols, &[1, 2, 3]).into_buffer();
+        let reused = bits(RowExtremes::new_in(&ranges, cols, &[1, 2], earlier));
+        assert_eq!(reused, fresh);
     }
 
     #[test]

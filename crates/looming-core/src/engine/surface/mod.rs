@@ -8,9 +8,11 @@
 //! in `window.rs`, a sparse sensor's ring lines in `ring.rs`, the linear
 //! algebra in `plane.rs`.
 
+mod fits;
 mod noise;
 mod plane;
 mod ring;
+mod spare;
 mod window;
 
 use nalgebra::Vector3;
@@ -24,8 +26,7 @@ use crate::model::Scan;
 pub(super) use plane::fit_plane_spread;
 
 use noise::{noise_per_row, row_noise, shrunk_to_sensor};
-use ring::{fit_ring_cell, ground_height};
-use window::{fit_window, gated_window, too_narrow};
+use ring::ground_height;
 
 /// Per cell of one image.
 #[derive(Debug, Clone)]
@@ -147,6 +148,7 @@ impl Surfaces {
         };
         let mut surfaces = Self::empty(geometry.cells(), geometry.cols);
         surfaces.write_fits(&returns, geometry, params, &noise_m_per_row);
+        returns.recycle();
         surfaces.noise_m_per_row = noise_m_per_row;
         surfaces.range_bias_m_per_row = range_bias_m_per_row;
         surfaces.joins = super::warp::mesh_joins(&surfaces, geometry.rows, geometry.cols);
@@ -154,64 +156,24 @@ impl Surfaces {
     }
 
     /// `cells` cells, every per-cell field to be written (`write_fits`).
+    /// (In the fields of a dropped one where there is one: see `Drop`.)
     fn empty(cells: usize, cols: usize) -> Self {
+        use spare::filled;
+        let spare = spare::take_fields();
         Self {
-            range_m: vec![f32::NAN; cells],
-            direction: vec![[0.0; 3]; cells],
-            normal: vec![[0.0; 3]; cells],
-            incidence_cos: vec![1.0; cells],
-            support: vec![0; cells],
-            edge: vec![false; cells],
+            range_m: filled(spare.range_m, cells, f32::NAN),
+            direction: filled(spare.direction, cells, [0.0; 3]),
+            normal: filled(spare.normal, cells, [0.0; 3]),
+            incidence_cos: filled(spare.incidence_cos, cells, 1.0),
+            support: filled(spare.support, cells, 0),
+            edge: filled(spare.edge, cells, false),
             noise_m_per_row: Vec::new(),
             range_bias_m_per_row: Vec::new(),
             joins: Vec::new(),
-            azimuth_rad: vec![f64::NAN; cells],
-            elevation_rad: vec![f64::NAN; cells],
+            azimuth_rad: filled(spare.azimuth_rad, cells, f64::NAN),
+            elevation_rad: filled(spare.elevation_rad, cells, f64::NAN),
             cols,
         }
-    }
-
-    /// Every cell's fit (`fit_cell`), row by row on rayon's workers, written
-    /// straight into the per-cell fields (no array of [`CellSurface`] to
-    /// split field by field), with the azimuth and elevation of its
-    /// `direction` (NaN where empty).
-    fn write_fits(
-        &mut self,
-        returns: &Returns,
-        geometry: &ImageGeometry,
-        params: SurfaceParams,
-        noise_m_per_row: &[f32],
-    ) {
-        let cols = geometry.cols.max(1);
-        let rows = (
-            self.range_m.par_chunks_mut(cols),
-            self.direction.par_chunks_mut(cols),
-            self.normal.par_chunks_mut(cols),
-            self.incidence_cos.par_chunks_mut(cols),
-            self.support.par_chunks_mut(cols),
-            self.edge.par_chunks_mut(cols),
-        );
-        rows.into_par_iter().enumerate().for_each_init(
-            // One scratch buffer per worker: no allocation per cell.
-            Scratch::default,
-            |scratch, (row, out)| {
-                let (range_m, direction, normal, incidence_cos, support, edge) = out;
-                let params = SurfaceParams {
-                    range_noise_m: f64::from(noise_m_per_row[row]),
-                    ..params
-                };
-                for col in 0..range_m.len() {
-                    let fit = fit_cell(returns, geometry, row * cols + col, params, scratch);
-                    range_m[col] = fit.range_m;
-                    direction[col] = fit.direction;
-                    normal[col] = fit.normal;
-                    incidence_cos[col] = fit.incidence_cos;
-                    support[col] = fit.support;
-                    edge[col] = fit.edge;
-                }
-            },
-        );
-        self.write_angles();
     }
 
     /// The azimuth and elevation of each cell's `direction` (NaN where
@@ -240,6 +202,28 @@ impl Surfaces {
                     }
                 }
             });
+    }
+}
+
+/// A scan's surfaces are dropped when the next pair's replace them: their
+/// per-cell fields go to the next scan's (`Surfaces::empty`), whose fresh
+/// pages cost more to fault in than to fill.
+impl Drop for Surfaces {
+    fn drop(&mut self) {
+        use std::mem::take;
+        if self.range_m.capacity() == 0 {
+            return;
+        }
+        spare::give_fields(spare::Fields {
+            range_m: take(&mut self.range_m),
+            direction: take(&mut self.direction),
+            normal: take(&mut self.normal),
+            incidence_cos: take(&mut self.incidence_cos),
+            support: take(&mut self.support),
+            edge: take(&mut self.edge),
+            azimuth_rad: take(&mut self.azimuth_rad),
+            elevation_rad: take(&mut self.elevation_rad),
+        });
     }
 }
 
@@ -290,7 +274,8 @@ impl<'a> Returns<'a> {
         range_bias_m: &[f32],
         window_half_cols: &[usize],
     ) -> Self {
-        let points: Vec<Vector3<f64>> = image
+        let mut spare = spare::take();
+        image
             .point
             .par_iter()
             .enumerate()
@@ -308,20 +293,38 @@ impl<'a> Returns<'a> {
                     _ => p,
                 }
             })
-            .collect();
-        Self::of_points(image, points, cols, window_half_cols)
+            .collect_into_vec(&mut spare.points);
+        Self::of_points_in(image, cols, window_half_cols, spare)
     }
 
     /// The returns `points` (one per cell of `image`; NaN empty).
+    #[cfg(test)]
     fn of_points(
         image: &'a RangeImage,
         points: Vec<Vector3<f64>>,
         cols: usize,
         window_half_cols: &[usize],
     ) -> Self {
-        let ranges: Vec<f64> = points.iter().map(|p| p.norm()).collect();
-        let sums = RowSums::new(&points, cols);
-        let extremes = RowExtremes::new(&ranges, cols, window_half_cols);
+        let spare = spare::Spare {
+            points,
+            ..Default::default()
+        };
+        Self::of_points_in(image, cols, window_half_cols, spare)
+    }
+
+    /// The returns `spare.points`, the rest in `spare`'s buffers.
+    fn of_points_in(
+        image: &'a RangeImage,
+        cols: usize,
+        window_half_cols: &[usize],
+        spare: spare::Spare,
+    ) -> Self {
+        let points = spare.points;
+        let mut ranges = spare.ranges;
+        ranges.clear();
+        ranges.extend(points.iter().map(|p| p.norm()));
+        let sums = RowSums::new_in(&points, cols, spare.sums);
+        let extremes = RowExtremes::new_in(&ranges, cols, window_half_cols, spare.extremes);
         Self {
             image,
             points,
@@ -329,6 +332,16 @@ impl<'a> Returns<'a> {
             sums,
             extremes,
         }
+    }
+
+    /// Give the buffers back for a later scan's.
+    fn recycle(self) {
+        spare::give(spare::Spare {
+            points: self.points,
+            ranges: self.ranges,
+            sums: self.sums.into_buffer(),
+            extremes: self.extremes.into_buffer(),
+        });
     }
 
     #[inline]
@@ -347,45 +360,8 @@ struct Scratch {
     immediate: Vec<bool>,
 }
 
-/// Fit the cell's plane in its window; where the window's points spread over
-/// less than a few noise sigmas in the plane (a close object seen by a dense
-/// sensor) the normal would be mostly noise, so the window grows (up to 7 beams).
-fn fit_cell(
-    returns: &Returns,
-    geometry: &ImageGeometry,
-    cell: usize,
-    params: SurfaceParams,
-    scratch: &mut Scratch,
-) -> CellSurface {
-    if params.sparse_rows {
-        return fit_ring_cell(returns, geometry, cell, params, scratch);
-    }
-    let mut best = EMPTY;
-    for grow in 1..=MAX_GROWTH {
-        let window = (grow, grow * params.half_cols);
-        let gated = gated_window(returns, geometry, cell, window);
-        if grow < MAX_GROWTH && gated.as_ref().is_some_and(|g| too_narrow(g, params)) {
-            continue;
-        }
-        let (surface, spread) = fit_window(
-            returns,
-            geometry,
-            cell,
-            params,
-            window,
-            gated.as_ref(),
-            scratch,
-        );
-        best = surface;
-        if spread.is_none_or(|s| s >= 2.0 * params.range_noise_m) {
-            break;
-        }
-    }
-    best
-}
-
 /// Growths of a cell's window at most: `2 grow + 1` beams.
-const MAX_GROWTH: usize = 3;
+pub(super) const MAX_GROWTH: usize = 3;
 
 /// The loose range gate of a window about a return `range_m` away, metres:
 /// neighbours farther from it in range are not candidates for its plane.

@@ -3,7 +3,7 @@
 use nalgebra::Matrix3;
 
 use super::plane::{eigenvalues_below, fit_plane, scatter, symmetric_eigenvalues};
-use super::window::{fit_gated_points, fit_whole_window};
+use super::window::{fit_gated_points, fit_whole_window, fit_window, gated_window, too_narrow};
 use super::*;
 
 #[test]
@@ -254,5 +254,50 @@ fn newtons_looser_stop_leaves_a_planes_smallest_eigenvalue_as_it_was() {
             (found - before).abs() <= bound,
             "{case}: {found} vs {before}"
         );
+    }
+}
+
+#[test]
+fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
+    // 17 rows: bands of 2 rows and one of 1; 150 columns: tiles of 64, 64, 22.
+    let (rows, cols) = (17, 150);
+    let (geometry, params, image) = dense_image(rows, cols, 0.02);
+    let mut points = noisy_plane(rows, cols, 0.02, 0.5);
+    for (cell, p) in points.iter_mut().enumerate() {
+        if cell % 13 == 5 {
+            *p = Vector3::repeat(f64::NAN);
+        } else if (60..70).contains(&(cell % cols)) {
+            // A close object: windows grow, edges at its sides.
+            *p *= 0.2;
+        }
+    }
+    let returns = Returns::of_points(&image, points, cols, &[2, 4, 6]);
+    let noise_m_per_row: Vec<f32> = (0..rows).map(|r| 0.01 + 0.002 * r as f32).collect();
+    let mut surfaces = Surfaces::empty(rows * cols, cols);
+    surfaces.write_fits(&returns, &geometry, params, &noise_m_per_row);
+    let mut scratch = Scratch::default();
+    for cell in 0..rows * cols {
+        let params = SurfaceParams {
+            range_noise_m: f64::from(noise_m_per_row[cell / cols]),
+            ..params
+        };
+        let want = fits::fit_cell(&returns, &geometry, cell, params, &mut scratch);
+        let got = (
+            surfaces.range_m[cell].to_bits(),
+            surfaces.direction[cell].map(f32::to_bits),
+            surfaces.normal[cell].map(f32::to_bits),
+            surfaces.incidence_cos[cell].to_bits(),
+            surfaces.support[cell],
+            surfaces.edge[cell],
+        );
+        let wanted = (
+            want.range_m.to_bits(),
+            want.direction.map(f32::to_bits),
+            want.normal.map(f32::to_bits),
+            want.incidence_cos.to_bits(),
+            want.support,
+            want.edge,
+        );
+        assert_eq!(got, wanted, "cell {cell}");
     }
 }

@@ -1,0 +1,84 @@
+//! The large buffers of a scan's [`Returns`](super::Returns), kept between
+//! scans: a 64 x 2048 image's returns, running sums and range extremes are
+//! 21 MB, whose fresh pages (the allocator hands such blocks back to the
+//! system when freed) cost the plane fits more to fault in than to fill.
+
+use std::sync::Mutex;
+
+use nalgebra::Vector3;
+
+use crate::engine::window_sums::Moments;
+
+/// One scan's buffers, empty or of an earlier scan (contents overwritten).
+#[derive(Default)]
+pub(super) struct Spare {
+    pub points: Vec<Vector3<f64>>,
+    pub ranges: Vec<f64>,
+    pub sums: Vec<Moments>,
+    pub extremes: Vec<[f64; 2]>,
+}
+
+/// Buffers given back, at most [`MAX_SPARE`] (the surfaces of a pair's two
+/// scans, of a few sensors, are estimated at once).
+static SPARE: Mutex<Vec<Spare>> = Mutex::new(Vec::new());
+
+const MAX_SPARE: usize = 4;
+
+/// Buffers given back earlier, or new empty ones.
+pub(super) fn take() -> Spare {
+    SPARE
+        .lock()
+        .ok()
+        .and_then(|mut spare| spare.pop())
+        .unwrap_or_default()
+}
+
+/// Keep `buffers` for a later scan's [`take`].
+pub(super) fn give(buffers: Spare) {
+    if let Ok(mut spare) = SPARE.lock()
+        && spare.len() < MAX_SPARE
+    {
+        spare.push(buffers);
+    }
+}
+
+/// The per-cell fields of a dropped [`Surfaces`](super::Surfaces) (6 MB at
+/// 64 x 2048), for the next scan's.
+#[derive(Default)]
+pub(super) struct Fields {
+    pub range_m: Vec<f32>,
+    pub direction: Vec<[f32; 3]>,
+    pub normal: Vec<[f32; 3]>,
+    pub incidence_cos: Vec<f32>,
+    pub support: Vec<u8>,
+    pub edge: Vec<bool>,
+    pub azimuth_rad: Vec<f64>,
+    pub elevation_rad: Vec<f64>,
+}
+
+static SPARE_FIELDS: Mutex<Vec<Fields>> = Mutex::new(Vec::new());
+
+/// Fields given back earlier, or new empty ones.
+pub(super) fn take_fields() -> Fields {
+    SPARE_FIELDS
+        .lock()
+        .ok()
+        .and_then(|mut spare| spare.pop())
+        .unwrap_or_default()
+}
+
+/// Keep `fields` for a later scan's [`take_fields`].
+pub(super) fn give_fields(fields: Fields) {
+    if let Ok(mut spare) = SPARE_FIELDS.lock()
+        && spare.len() < MAX_SPARE
+    {
+        spare.push(fields);
+    }
+}
+
+/// `buffer` cleared and filled with `len` copies of `value`.
+pub(super) fn filled<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {
+    buffer.clear();
+    buffer.resize(len, value);
+    buffer
+}
