@@ -165,7 +165,7 @@ pub fn render(
                 target,
                 geometry,
                 scan_offset_ns,
-                cell,
+                (row, cell),
                 &mut cache,
                 normal,
             );

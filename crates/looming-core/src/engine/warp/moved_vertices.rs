@@ -230,7 +230,8 @@ impl Sloped {
     }
 }
 
-/// The source return of `cell` moved into the target: where it lands (image
+/// The source return of `cell` (in source `row`: no division per
+/// return) moved into the target: where it lands (image
 /// coordinates), with its normal into `normal` where one is asked for;
 /// `None` without a return, or where it lands across the seam of the sweep.
 pub(super) fn warp_vertex(
@@ -238,7 +239,7 @@ pub(super) fn warp_vertex(
     target: &Target,
     geometry: &ImageGeometry,
     scan_offset_ns: StampNs,
-    cell: usize,
+    (row, cell): (usize, usize),
     cache: &mut TransformCache,
     normal: Option<&mut Vector3<f64>>,
 ) -> Option<Vertex> {
@@ -287,11 +288,7 @@ pub(super) fn warp_vertex(
         );
     Some(Vertex {
         position: moved,
-        row: geometry.row_f_at(
-            elevation,
-            (level_squared + moved.z * moved.z).sqrt(),
-            cell / geometry.cols,
-        ),
+        row: geometry.row_f_at(elevation, (level_squared + moved.z * moved.z).sqrt(), row),
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })

@@ -234,6 +234,21 @@ pub(super) fn rasterize_ring(
     out
 }
 
+/// The smaller of two image coordinates by one comparison: `f64::min`
+/// also sorts out NaN, which no vertex's coordinates hold (finite ranges
+/// and angles), at three times the instructions, and a quad's set-up takes
+/// two dozen.
+#[inline(always)]
+fn least(a: f64, b: f64) -> f64 {
+    if b < a { b } else { a }
+}
+
+/// The larger of two image coordinates by one comparison ([`least`]).
+#[inline(always)]
+fn most(a: f64, b: f64) -> f64 {
+    if b > a { b } else { a }
+}
+
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
 const MAX_SPAN_CELLS: f64 = 24.0;
 
@@ -245,10 +260,10 @@ const MAX_SPAN_CELLS: f64 = 24.0;
 /// ranges. The same candidates as [`rasterize_triangle`] on each (a larger
 /// box holds no more rays inside a triangle). `false`, with nothing done,
 /// near the seam.
-fn rasterize_quad(
+fn rasterize_quad<'v>(
     target: &Target,
     geometry: &ImageGeometry,
-    triangles: [Option<([&Vertex; 3], bool)>; 2],
+    triangles: [Option<([&'v Vertex; 3], bool)>; 2],
     out: &mut Vec<Candidate>,
 ) -> bool {
     let cols = geometry.cols as f64;
@@ -257,8 +272,8 @@ fn rasterize_quad(
     let (mut c_min, mut c_max) = (f64::INFINITY, f64::NEG_INFINITY);
     for (v, _) in triangles.iter().flatten() {
         for vertex in v {
-            (r_min, r_max) = (r_min.min(vertex.row), r_max.max(vertex.row));
-            (c_min, c_max) = (c_min.min(vertex.col), c_max.max(vertex.col));
+            (r_min, r_max) = (least(r_min, vertex.row), most(r_max, vertex.row));
+            (c_min, c_max) = (least(c_min, vertex.col), most(c_max, vertex.col));
         }
     }
     // Away from the seam, every column lies within a quarter turn of every
@@ -273,16 +288,26 @@ fn rasterize_quad(
     {
         return false;
     }
-    let first = triangles[0].and_then(|(v, edge)| FlatTriangle::set_up(v, edge));
-    let second = triangles[1].and_then(|(v, edge)| FlatTriangle::set_up(v, edge));
+    // Where the whole quad spans no more than a triangle may, neither of
+    // its triangles needs its own check.
+    let narrow = r_max - r_min <= MAX_SPAN_CELLS && c_max - c_min <= MAX_SPAN_CELLS;
+    let set_up = |(v, edge): ([&'v Vertex; 3], bool)| {
+        if narrow {
+            FlatTriangle::narrow(v, edge)
+        } else {
+            FlatTriangle::set_up(v, edge)
+        }
+    };
+    let first = triangles[0].and_then(set_up);
+    let second = triangles[1].and_then(set_up);
     if first.is_none() && second.is_none() {
         return true;
     }
     let mut planes = [None, None];
-    let row_lo = r_min.floor().max((r_min - row_reach).ceil()).max(0.0) as usize;
-    let row_hi = (r_max.ceil().min((r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
-    let col_lo = c_min.floor().max((c_min - col_reach).ceil()) as usize;
-    let col_hi = c_max.ceil().min((c_max + col_reach).floor()) as usize;
+    let row_lo = most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0) as usize;
+    let row_hi = (least(r_max.ceil(), (r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
+    let col_lo = most(c_min.floor(), (c_min - col_reach).ceil()) as usize;
+    let col_hi = least(c_max.ceil(), (c_max + col_reach).floor()) as usize;
     for row in row_lo..=row_hi {
         for col in col_lo..=col_hi {
             let cell = row * geometry.cols + col;
@@ -343,11 +368,28 @@ impl<'v> FlatTriangle<'v> {
     /// (unwrapped) columns `c` of vertices `v`.
     #[inline]
     fn at(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
-        let (r_min, r_max) = (r[0].min(r[1]).min(r[2]), r[0].max(r[1]).max(r[2]));
-        let (c_min, c_max) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+        let (r_min, r_max) = (least(least(r[0], r[1]), r[2]), most(most(r[0], r[1]), r[2]));
+        let (c_min, c_max) = (least(least(c[0], c[1]), c[2]), most(most(c[0], c[1]), c[2]));
         if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
             return None;
         }
+        Self::spanning(v, (r, c), edge)
+    }
+
+    /// [`Self::set_up`] for a triangle known to span no more than
+    /// [`MAX_SPAN_CELLS`] (its quad's box does not).
+    #[inline]
+    fn narrow(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
+        let (r, c) = (
+            [v[0].row, v[1].row, v[2].row],
+            [v[0].col, v[1].col, v[2].col],
+        );
+        Self::spanning(v, (&r, &c), edge)
+    }
+
+    /// The set-up once the span is checked: `None` where degenerate.
+    #[inline]
+    fn spanning(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
         let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
         if denominator.abs() < 1e-12 {
             return None;
@@ -497,18 +539,18 @@ fn cells_in_reach(
     r: &[f64; 3],
     c: &[f64; 3],
 ) -> Option<((usize, usize), (i64, i64))> {
-    let (r_min, r_max) = (r[0].min(r[1]).min(r[2]), r[0].max(r[1]).max(r[2]));
-    let (c_min, c_max) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+    let (r_min, r_max) = (least(least(r[0], r[1]), r[2]), most(most(r[0], r[1]), r[2]));
+    let (c_min, c_max) = (least(least(c[0], c[1]), c[2]), most(most(c[0], c[1]), c[2]));
     if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
         return None;
     }
     // The box widened by the target's reach (about half a cell, where the
     // whole cells around the box hold some three times as many).
     let (row_reach, col_reach) = (target.reach.0 + REACH_SLACK, target.reach.1 + REACH_SLACK);
-    let row_lo = r_min.floor().max((r_min - row_reach).ceil()).max(0.0) as usize;
-    let row_hi = (r_max.ceil().min((r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
-    let col_lo = c_min.floor().max((c_min - col_reach).ceil()) as i64;
-    let col_hi = c_max.ceil().min((c_max + col_reach).floor()) as i64;
+    let row_lo = most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0) as usize;
+    let row_hi = (least(r_max.ceil(), (r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
+    let col_lo = most(c_min.floor(), (c_min - col_reach).ceil()) as i64;
+    let col_hi = least(c_max.ceil(), (c_max + col_reach).floor()) as i64;
     if row_lo > row_hi || col_lo > col_hi {
         return None;
     }
