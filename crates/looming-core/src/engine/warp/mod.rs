@@ -131,6 +131,45 @@ impl Vertices {
     }
 }
 
+/// Whether the occupied cells of source column `col` share one time.
+fn column_shares_time(source: &Source, geometry: &ImageGeometry, col: usize) -> bool {
+    let mut times = (0..geometry.rows)
+        .map(|row| row * geometry.cols + col)
+        .filter(|&cell| source.surfaces.range_m[cell].is_finite())
+        .map(|cell| source.time_ns[cell]);
+    let first = times.next();
+    times.all(|time_ns| Some(time_ns) == first)
+}
+
+/// The returns of source column `col` moved into the target
+/// ([`warp_vertex`]), into `column` (and their normals into `normals` where
+/// asked), with one transform cache.
+#[allow(clippy::too_many_arguments)]
+fn warp_rows<const LINES: bool>(
+    source: &Source,
+    target: &Target,
+    geometry: &ImageGeometry,
+    scan_offset_ns: StampNs,
+    col: usize,
+    column: &mut [Option<Vertex>],
+    normals: &mut [Vector3<f64>],
+    cache: &mut TransformCache<LINES>,
+) {
+    for (row, vertex) in column.iter_mut().enumerate() {
+        let cell = row * geometry.cols + col;
+        let normal = normals.get_mut(row);
+        *vertex = warp_vertex(
+            source,
+            target,
+            geometry,
+            scan_offset_ns,
+            (row, cell),
+            cache,
+            normal,
+        );
+    }
+}
+
 pub fn render(
     source: &Source,
     target: &Target,
@@ -155,19 +194,32 @@ pub fn render(
     };
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
+    // (A column whose returns do not share their time, KITTI's, takes its
+    // transforms along lines: `TransformCache`.)
     let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
-        let mut cache = TransformCache::new(trajectory, &arrivals);
-        for (row, vertex) in column.iter_mut().enumerate() {
-            let cell = row * geometry.cols + col;
-            let normal = normals.get_mut(row);
-            *vertex = warp_vertex(
+        if column_shares_time(source, geometry, col) {
+            let mut cache = TransformCache::<false>::new(trajectory, &arrivals);
+            warp_rows(
                 source,
                 target,
                 geometry,
                 scan_offset_ns,
-                (row, cell),
+                col,
+                column,
+                normals,
                 &mut cache,
-                normal,
+            );
+        } else {
+            let mut cache = TransformCache::<true>::new(trajectory, &arrivals);
+            warp_rows(
+                source,
+                target,
+                geometry,
+                scan_offset_ns,
+                col,
+                column,
+                normals,
+                &mut cache,
             );
         }
     };

@@ -70,8 +70,11 @@ impl Moving {
 /// their own azimuth), every return's departure differs from the last, and
 /// composing poses for each was a fifth of the renders: there a transform
 /// is taken along the straight line between two composed ones
-/// ([`Sloped`]), within [`LINEAR_REACH_NS`] of the first.
-pub(super) struct TransformCache<'a> {
+/// ([`Sloped`]), within [`LINEAR_REACH_NS`] of the first. `LINES` says
+/// which (`render` chooses per source column): without lines the cache is
+/// compiled without them, as the warp of returns sharing their time slowed
+/// by a tenth with the lines' code beside it.
+pub(super) struct TransformCache<'a, const LINES: bool> {
     trajectory: &'a Trajectory,
     /// Per target column, from [`arrival_poses`].
     arrivals: &'a [Isometry3<f64>],
@@ -87,7 +90,7 @@ pub(super) struct TransformCache<'a> {
     next_line: usize,
 }
 
-impl<'a> TransformCache<'a> {
+impl<'a, const LINES: bool> TransformCache<'a, LINES> {
     pub(super) fn new(trajectory: &'a Trajectory, arrivals: &'a [Isometry3<f64>]) -> Self {
         Self {
             trajectory,
@@ -107,6 +110,12 @@ impl<'a> TransformCache<'a> {
         if let Some((key, transform)) = self.to_time
             && key == (from_ns, to_ns)
         {
+            return transform;
+        }
+        if !LINES {
+            let transform =
+                Moving::new(self.trajectory.pose(to_ns).inverse() * self.departure(from_ns));
+            self.to_time = Some(((from_ns, to_ns), transform));
             return transform;
         }
         let offset_ns = to_ns - from_ns;
@@ -138,6 +147,12 @@ impl<'a> TransformCache<'a> {
         let key = (from_ns, col);
         if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
             return *transform;
+        }
+        if !LINES {
+            let transform = Moving::new(self.arrivals[col] * self.departure(from_ns));
+            self.to_columns[self.next] = Some((key, transform));
+            self.next = (self.next + 1) % self.to_columns.len();
+            return transform;
         }
         let line = self
             .to_column_lines
@@ -234,13 +249,13 @@ impl Sloped {
 /// return) moved into the target: where it lands (image
 /// coordinates), with its normal into `normal` where one is asked for;
 /// `None` without a return, or where it lands across the seam of the sweep.
-pub(super) fn warp_vertex(
+pub(super) fn warp_vertex<const LINES: bool>(
     source: &Source,
     target: &Target,
     geometry: &ImageGeometry,
     scan_offset_ns: StampNs,
     (row, cell): (usize, usize),
-    cache: &mut TransformCache,
+    cache: &mut TransformCache<LINES>,
     normal: Option<&mut Vector3<f64>>,
 ) -> Option<Vertex> {
     let range = f64::from(source.surfaces.range_m[cell]);
@@ -412,7 +427,7 @@ mod tests {
     fn cached_transforms_are_the_trajectorys_relative_ones_bit_for_bit() {
         let (trajectory, column_time_ns, previous_ns) = turning_drive();
         let arrivals = arrival_poses(&column_time_ns, &trajectory);
-        let mut cache = TransformCache::new(&trajectory, &arrivals);
+        let mut cache = TransformCache::<true>::new(&trajectory, &arrivals);
         let same = |a: Moving, b: Isometry3<f64>| {
             let b = Moving::new(b);
             a.translation
@@ -448,7 +463,7 @@ mod tests {
         // Returns of one column each at its own time (KITTI's): along the
         // line between two composed transforms, off the exact ones by far
         // less than a micrometre or a microradian.
-        let mut cache = TransformCache::new(&trajectory, &arrivals);
+        let mut cache = TransformCache::<true>::new(&trajectory, &arrivals);
         let offset_ns = 100_000_000;
         let mut worst = (0.0f64, 0.0f64);
         for k in 0..2_000i64 {
