@@ -141,32 +141,40 @@ fn column_shares_time(source: &Source, geometry: &ImageGeometry, col: usize) -> 
     times.all(|time_ns| Some(time_ns) == first)
 }
 
-/// The returns of source column `col` moved into the target
-/// ([`warp_vertex`]), into `column` (and their normals into `normals` where
-/// asked), with one transform cache.
-#[allow(clippy::too_many_arguments)]
-fn warp_rows<const LINES: bool>(
-    source: &Source,
-    target: &Target,
-    geometry: &ImageGeometry,
+/// What every source column's warp shares.
+struct ColumnWarp<'r, 's> {
+    source: &'r Source<'s>,
+    target: &'r Target<'s>,
+    geometry: &'r ImageGeometry,
+    trajectory: &'r Trajectory,
+    arrivals: &'r [nalgebra::Isometry3<f64>],
     scan_offset_ns: StampNs,
-    col: usize,
-    column: &mut [Option<Vertex>],
-    normals: &mut [Vector3<f64>],
-    cache: &mut TransformCache<LINES>,
-) {
-    for (row, vertex) in column.iter_mut().enumerate() {
-        let cell = row * geometry.cols + col;
-        let normal = normals.get_mut(row);
-        *vertex = warp_vertex(
-            source,
-            target,
-            geometry,
-            scan_offset_ns,
-            (row, cell),
-            cache,
-            normal,
-        );
+}
+
+impl ColumnWarp<'_, '_> {
+    /// The returns of source column `col` moved into the target
+    /// ([`warp_vertex`]), into `column` (and their normals into `normals`
+    /// where asked), with one transform cache.
+    fn rows<const LINES: bool>(
+        &self,
+        col: usize,
+        column: &mut [Option<Vertex>],
+        normals: &mut [Vector3<f64>],
+    ) {
+        let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
+        for (row, vertex) in column.iter_mut().enumerate() {
+            let cell = row * self.geometry.cols + col;
+            let normal = normals.get_mut(row);
+            *vertex = warp_vertex(
+                self.source,
+                self.target,
+                self.geometry,
+                self.scan_offset_ns,
+                (row, cell),
+                &mut cache,
+                normal,
+            );
+        }
     }
 }
 
@@ -196,31 +204,19 @@ pub fn render(
     // relative transforms are computed once per column, not once per return.
     // (A column whose returns do not share their time, KITTI's, takes its
     // transforms along lines: `TransformCache`.)
+    let columns = ColumnWarp {
+        source,
+        target,
+        geometry,
+        trajectory,
+        arrivals: &arrivals,
+        scan_offset_ns,
+    };
     let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
         if column_shares_time(source, geometry, col) {
-            let mut cache = TransformCache::<false>::new(trajectory, &arrivals);
-            warp_rows(
-                source,
-                target,
-                geometry,
-                scan_offset_ns,
-                col,
-                column,
-                normals,
-                &mut cache,
-            );
+            columns.rows::<false>(col, column, normals);
         } else {
-            let mut cache = TransformCache::<true>::new(trajectory, &arrivals);
-            warp_rows(
-                source,
-                target,
-                geometry,
-                scan_offset_ns,
-                col,
-                column,
-                normals,
-                &mut cache,
-            );
+            columns.rows::<true>(col, column, normals);
         }
     };
     let chunk = rows.max(1);
