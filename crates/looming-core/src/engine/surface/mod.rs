@@ -159,7 +159,7 @@ impl Surfaces {
     /// (In the fields of a dropped one where there is one: see `Drop`.)
     fn empty(cells: usize, cols: usize) -> Self {
         use spare::filled;
-        let spare = spare::take_fields();
+        let spare = spare::FIELDS.take();
         Self {
             range_m: filled(spare.range_m, cells, f32::NAN),
             direction: filled(spare.direction, cells, [0.0; 3]),
@@ -214,7 +214,7 @@ impl Drop for Surfaces {
         if self.range_m.capacity() == 0 {
             return;
         }
-        spare::give_fields(spare::Fields {
+        spare::FIELDS.give(spare::Fields {
             range_m: take(&mut self.range_m),
             direction: take(&mut self.direction),
             normal: take(&mut self.normal),
@@ -274,7 +274,7 @@ impl<'a> Returns<'a> {
         range_bias_m: &[f32],
         window_half_cols: &[usize],
     ) -> Self {
-        let mut spare = spare::take();
+        let mut spare = spare::RETURNS.take();
         image
             .point
             .par_iter()
@@ -336,7 +336,7 @@ impl<'a> Returns<'a> {
 
     /// Give the buffers back for a later scan's.
     fn recycle(self) {
-        spare::give(spare::Spare {
+        spare::RETURNS.give(spare::Spare {
             points: self.points,
             ranges: self.ranges,
             sums: self.sums.into_buffer(),

@@ -18,29 +18,38 @@ pub(super) struct Spare {
     pub extremes: Vec<[f64; 2]>,
 }
 
-/// Buffers given back, at most [`MAX_SPARE`] (the surfaces of a pair's two
-/// scans, of a few sensors, are estimated at once).
-static SPARE: Mutex<Vec<Spare>> = Mutex::new(Vec::new());
+/// Buffers given back for later scans, at most [`MAX_SPARE`] (the
+/// surfaces of a pair's two scans, of a few sensors, are estimated at once).
+pub(super) struct Pool<T>(Mutex<Vec<T>>);
 
 const MAX_SPARE: usize = 4;
 
-/// Buffers given back earlier, or new empty ones.
-pub(super) fn take() -> Spare {
-    SPARE
-        .lock()
-        .ok()
-        .and_then(|mut spare| spare.pop())
-        .unwrap_or_default()
-}
+impl<T: Default> Pool<T> {
+    const fn new() -> Self {
+        Self(Mutex::new(Vec::new()))
+    }
 
-/// Keep `buffers` for a later scan's [`take`].
-pub(super) fn give(buffers: Spare) {
-    if let Ok(mut spare) = SPARE.lock()
-        && spare.len() < MAX_SPARE
-    {
-        spare.push(buffers);
+    /// Buffers given back earlier, or new empty ones.
+    pub(super) fn take(&self) -> T {
+        self.0
+            .lock()
+            .ok()
+            .and_then(|mut spare| spare.pop())
+            .unwrap_or_default()
+    }
+
+    /// Keep `buffers` for a later [`Pool::take`].
+    pub(super) fn give(&self, buffers: T) {
+        if let Ok(mut spare) = self.0.lock()
+            && spare.len() < MAX_SPARE
+        {
+            spare.push(buffers);
+        }
     }
 }
+
+/// The returns' buffers ([`Spare`]) of scans done.
+pub(super) static RETURNS: Pool<Spare> = Pool::new();
 
 /// The per-cell fields of a dropped [`Surfaces`](super::Surfaces) (6 MB at
 /// 64 x 2048), for the next scan's.
@@ -56,25 +65,8 @@ pub(super) struct Fields {
     pub elevation_rad: Vec<f64>,
 }
 
-static SPARE_FIELDS: Mutex<Vec<Fields>> = Mutex::new(Vec::new());
-
-/// Fields given back earlier, or new empty ones.
-pub(super) fn take_fields() -> Fields {
-    SPARE_FIELDS
-        .lock()
-        .ok()
-        .and_then(|mut spare| spare.pop())
-        .unwrap_or_default()
-}
-
-/// Keep `fields` for a later scan's [`take_fields`].
-pub(super) fn give_fields(fields: Fields) {
-    if let Ok(mut spare) = SPARE_FIELDS.lock()
-        && spare.len() < MAX_SPARE
-    {
-        spare.push(fields);
-    }
-}
+/// The per-cell fields of dropped surfaces.
+pub(super) static FIELDS: Pool<Fields> = Pool::new();
 
 /// `buffer` cleared and filled with `len` copies of `value`.
 pub(super) fn filled<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {

@@ -112,12 +112,6 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
         {
             return transform;
         }
-        if !LINES {
-            let transform =
-                Moving::new(self.trajectory.pose(to_ns).inverse() * self.departure(from_ns));
-            self.to_time = Some(((from_ns, to_ns), transform));
-            return transform;
-        }
         let offset_ns = to_ns - from_ns;
         let composed = |cache: &mut Self, from_ns: StampNs| {
             Moving::new(
@@ -125,9 +119,12 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
             )
         };
         let transform = match self.to_time_line {
-            Some((key, line)) if key == offset_ns && line.reaches(from_ns) => line.at(from_ns),
-            _ if self.to_time.is_none() || self.line_pays(from_ns) => {
-                // The first transform, or a column whose returns share their time.
+            Some((key, line)) if LINES && key == offset_ns && line.reaches(from_ns) => {
+                line.at(from_ns)
+            }
+            // Without lines; the first transform; or a column whose
+            // returns share their time.
+            _ if !LINES || self.to_time.is_none() || self.line_pays(from_ns) => {
                 composed(self, from_ns)
             }
             _ => {
@@ -148,20 +145,14 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
         if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
             return *transform;
         }
-        if !LINES {
-            let transform = Moving::new(self.arrivals[col] * self.departure(from_ns));
-            self.to_columns[self.next] = Some((key, transform));
-            self.next = (self.next + 1) % self.to_columns.len();
-            return transform;
-        }
         let line = self
             .to_column_lines
             .iter()
             .flatten()
-            .find(|(line_col, line)| *line_col == col && line.reaches(from_ns));
+            .find(|(line_col, line)| LINES && *line_col == col && line.reaches(from_ns));
         let transform = match line {
             Some((_, line)) => line.at(from_ns),
-            None if self.line_pays(from_ns) => {
+            None if !LINES || self.line_pays(from_ns) => {
                 Moving::new(self.arrivals[col] * self.departure(from_ns))
             }
             None => {
