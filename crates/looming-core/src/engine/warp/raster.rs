@@ -9,7 +9,7 @@ use super::mesh::{
     EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
     on_one_surface,
 };
-use super::{Candidate, REACH_SLACK, Source, Target, Vertex, Vertices};
+use super::{Candidate, REACH_SLACK, Reach, Source, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
 use crate::model::StampNs;
 
@@ -308,6 +308,9 @@ fn rasterize_quad<'v>(
     let row_hi = (least(r_max.ceil(), (r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
     let col_lo = most(c_min.floor(), (c_min - col_reach).ceil()) as usize;
     let col_hi = least(c_max.ceil(), (c_max + col_reach).floor()) as usize;
+    let bands = &target.bands;
+    let (row_lo, row_hi) = within_bands(&bands.rows, (row_lo, row_hi), (r_min, r_max));
+    let (col_lo, col_hi) = within_bands(&bands.cols, (col_lo, col_hi), (c_min, c_max));
     for row in row_lo..=row_hi {
         for col in col_lo..=col_hi {
             let cell = row * geometry.cols + col;
@@ -330,6 +333,28 @@ fn rasterize_quad<'v>(
         }
     }
     true
+}
+
+/// The range `lo..=hi` of rows (or columns) without those at its ends
+/// whose rays all lie short of `[min, max]` by their band's reach: the
+/// box's global reach comes from a few stray rays, and a row of rays
+/// within a tenth of their row (most of KITTI's) holds none of a quad
+/// whose rows begin half a row past it. (Rows in between are kept: they
+/// hold rays in the box, or, rarely, ones the weights reject.) `lo > hi`
+/// where none is left.
+#[inline]
+fn within_bands(
+    bands: &[Reach],
+    (mut lo, mut hi): (usize, usize),
+    (min, max): (f64, f64),
+) -> (usize, usize) {
+    while lo <= hi && lo as f64 + bands[lo].after + REACH_SLACK < min {
+        lo += 1;
+    }
+    while hi > lo && hi as f64 - bands[hi].before - REACH_SLACK > max {
+        hi -= 1;
+    }
+    (lo, hi)
 }
 
 /// A triangle set up for the barycentric tests: the differences of its
