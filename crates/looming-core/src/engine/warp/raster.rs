@@ -311,6 +311,10 @@ fn rasterize_quad<'v>(
     let bands = &target.bands;
     let (row_lo, row_hi) = within_bands(&bands.rows, (row_lo, row_hi), (r_min, r_max));
     let (col_lo, col_hi) = within_bands(&bands.cols, (col_lo, col_hi), (c_min, c_max));
+    let shared = first
+        .as_ref()
+        .zip(second.as_ref())
+        .and_then(|(a, b)| SharedDiagonal::of(a, b));
     for row in row_lo..=row_hi {
         for col in col_lo..=col_hi {
             let cell = row * geometry.cols + col;
@@ -319,12 +323,14 @@ fn rasterize_quad<'v>(
             }
             let (tr, tc) = target.coords[cell];
             let (tr, tc) = (f64::from(tr), f64::from(tc));
-            for (triangle, plane) in [&first, &second].into_iter().zip(&mut planes) {
-                let Some(triangle) = triangle else {
-                    continue;
-                };
-                let w = triangle.weights(tr, tc);
-                if let Some(w) = w
+            let weights = match &shared {
+                Some(shared) => shared.weights(tr, tc),
+                None => [&first, &second].map(|t| t.as_ref().and_then(|t| t.weights(tr, tc))),
+            };
+            for ((triangle, plane), w) in
+                [&first, &second].into_iter().zip(&mut planes).zip(weights)
+            {
+                if let (Some(triangle), Some(w)) = (triangle, w)
                     && let Some(hit) = hit(target, cell, triangle.v, w, triangle.edge, plane)
                 {
                     out.push(hit);
@@ -333,6 +339,49 @@ fn rasterize_quad<'v>(
         }
     }
     true
+}
+
+/// A quad's two triangles `(a, b, c)` and `(b, d, c)`, which share the
+/// diagonal `b c` and their third vertex `c`: the first's weight of `a`
+/// and the second's of `d` are one edge function of that diagonal, the
+/// same products (negated where the two triangles' orientations agree),
+/// so a ray takes it once, and a ray beyond the diagonal on `a`'s side
+/// skips the second triangle's test (most rays lie inside one of the two).
+/// The same weights, bit for bit, as each triangle's own test.
+struct SharedDiagonal<'t, 'v> {
+    first: &'t FlatTriangle<'v>,
+    second: &'t FlatTriangle<'v>,
+    /// The second triangle's weight of `d` is the first's of `a` times
+    /// this (in the weights' unscaled units): `-1` or `1`.
+    factor: f64,
+}
+
+impl<'t, 'v> SharedDiagonal<'t, 'v> {
+    fn of(first: &'t FlatTriangle<'v>, second: &'t FlatTriangle<'v>) -> Option<Self> {
+        let shares = std::ptr::eq(first.v[1], second.v[0]) && std::ptr::eq(first.v[2], second.v[2]);
+        shares.then_some(Self {
+            first,
+            second,
+            factor: -(first.sign * second.sign),
+        })
+    }
+
+    /// Each triangle's weights of `(tr, tc)` where it lies inside.
+    #[inline]
+    fn weights(&self, tr: f64, tc: f64) -> [Option<[f64; 3]>; 2] {
+        // Both triangles' third vertex is `c`: the same differences.
+        let (dc, dr) = (tc - self.first.c2, tr - self.first.r2);
+        let diagonal = self.first.scaled_weight(0, dc, dr);
+        let first = self.first.weights_given(dc, dr, diagonal);
+        let of_d = self.factor * diagonal;
+        let second = if of_d < -self.second.tolerance {
+            None
+        } else {
+            let of_b = self.second.scaled_weight(0, dc, dr);
+            self.second.weights_of(of_b, of_d)
+        };
+        [first, second]
+    }
 }
 
 /// The range `lo..=hi` of rows (or columns) without those at its ends
@@ -371,6 +420,8 @@ struct FlatTriangle<'v> {
     steps: [f64; 4],
     /// `|(r1 - r2)(c0 - c2) + (c2 - c1)(r0 - r2)|`, twice the area.
     denominator: f64,
+    /// The sign of that sum (the triangle's orientation): `-1` or `1`.
+    sign: f64,
     /// How far outside, in the weights' units times `denominator`, a ray
     /// still counts as inside.
     tolerance: f64,
@@ -426,6 +477,7 @@ impl<'v> FlatTriangle<'v> {
             c2: c[2],
             steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
             denominator: denominator.abs(),
+            sign,
             tolerance: EDGE_WEIGHT * denominator.abs(),
             edge,
         })
@@ -436,14 +488,32 @@ impl<'v> FlatTriangle<'v> {
     #[inline]
     fn weights(&self, tr: f64, tc: f64) -> Option<[f64; 3]> {
         let (dc, dr) = (tc - self.c2, tr - self.r2);
-        let [k0, k1, k2, k3] = self.steps;
-        let s0 = k0 * dc + k1 * dr;
+        self.weights_given(dc, dr, self.scaled_weight(0, dc, dr))
+    }
+
+    /// [`Self::weights`] of the ray `(dc, dr)` from the third vertex, its
+    /// first weight (times the denominator) `s0` known.
+    #[inline]
+    fn weights_given(&self, dc: f64, dr: f64, s0: f64) -> Option<[f64; 3]> {
         if s0 < -self.tolerance {
             return None;
         }
-        let s1 = k2 * dc + k3 * dr;
+        self.weights_of(s0, self.scaled_weight(1, dc, dr))
+    }
+
+    /// Weight `k` (0 or 1) of the ray `(dc, dr)` from the third vertex,
+    /// times the denominator.
+    #[inline]
+    fn scaled_weight(&self, k: usize, dc: f64, dr: f64) -> f64 {
+        self.steps[2 * k] * dc + self.steps[2 * k + 1] * dr
+    }
+
+    /// The weights from the first two times the denominator, where all
+    /// three lie inside.
+    #[inline]
+    fn weights_of(&self, s0: f64, s1: f64) -> Option<[f64; 3]> {
         let s2 = self.denominator - s0 - s1;
-        if s1 < -self.tolerance || s2 < -self.tolerance {
+        if s0 < -self.tolerance || s1 < -self.tolerance || s2 < -self.tolerance {
             return None;
         }
         let inverse = 1.0 / self.denominator;
