@@ -8,6 +8,7 @@
 //! `moved_vertices.rs`, the mesh's joins and bridged dropouts in `mesh.rs`,
 //! the rasterisation in `raster.rs`.
 
+mod flat_triangle;
 mod mesh;
 mod moved_vertices;
 mod raster;
