@@ -5,11 +5,12 @@
 
 use nalgebra::Vector3;
 
+use super::flat_triangle::{FlatTriangle, SharedDiagonal};
 use super::mesh::{
     EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
     on_one_surface,
 };
-use super::{Candidate, REACH_SLACK, Source, Target, Vertex, Vertices};
+use super::{Candidate, REACH_SLACK, Reach, Source, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
 use crate::model::StampNs;
 
@@ -239,18 +240,18 @@ pub(super) fn rasterize_ring(
 /// and angles), at three times the instructions, and a quad's set-up takes
 /// two dozen.
 #[inline(always)]
-fn least(a: f64, b: f64) -> f64 {
+pub(super) fn least(a: f64, b: f64) -> f64 {
     if b < a { b } else { a }
 }
 
 /// The larger of two image coordinates by one comparison ([`least`]).
 #[inline(always)]
-fn most(a: f64, b: f64) -> f64 {
+pub(super) fn most(a: f64, b: f64) -> f64 {
     if b > a { b } else { a }
 }
 
 /// Largest triangle (in cells) worth rasterising: anything bigger is a bridge.
-const MAX_SPAN_CELLS: f64 = 24.0;
+pub(super) const MAX_SPAN_CELLS: f64 = 24.0;
 
 /// Every target ray inside a quad's triangles (`None` for one the mesh
 /// does not hold), into `out`, where the quad lies away from the seam of
@@ -308,6 +309,13 @@ fn rasterize_quad<'v>(
     let row_hi = (least(r_max.ceil(), (r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
     let col_lo = most(c_min.floor(), (c_min - col_reach).ceil()) as usize;
     let col_hi = least(c_max.ceil(), (c_max + col_reach).floor()) as usize;
+    let bands = &target.bands;
+    let (row_lo, row_hi) = within_bands(&bands.rows, (row_lo, row_hi), (r_min, r_max));
+    let (col_lo, col_hi) = within_bands(&bands.cols, (col_lo, col_hi), (c_min, c_max));
+    let shared = first
+        .as_ref()
+        .zip(second.as_ref())
+        .and_then(|(a, b)| SharedDiagonal::of(a, b));
     for row in row_lo..=row_hi {
         for col in col_lo..=col_hi {
             let cell = row * geometry.cols + col;
@@ -316,12 +324,14 @@ fn rasterize_quad<'v>(
             }
             let (tr, tc) = target.coords[cell];
             let (tr, tc) = (f64::from(tr), f64::from(tc));
-            for (triangle, plane) in [&first, &second].into_iter().zip(&mut planes) {
-                let Some(triangle) = triangle else {
-                    continue;
-                };
-                let w = triangle.weights(tr, tc);
-                if let Some(w) = w
+            let weights = match &shared {
+                Some(shared) => shared.weights(tr, tc),
+                None => [&first, &second].map(|t| t.as_ref().and_then(|t| t.weights(tr, tc))),
+            };
+            for ((triangle, plane), w) in
+                [&first, &second].into_iter().zip(&mut planes).zip(weights)
+            {
+                if let (Some(triangle), Some(w)) = (triangle, w)
                     && let Some(hit) = hit(target, cell, triangle.v, w, triangle.edge, plane)
                 {
                     out.push(hit);
@@ -332,104 +342,27 @@ fn rasterize_quad<'v>(
     true
 }
 
-/// A triangle set up for the barycentric tests: the differences of its
-/// coordinates the weights take, taken once, with the sign of its
-/// orientation, so that a ray is tested without the division (only the
-/// rays inside, about one a triangle in two, take it).
-struct FlatTriangle<'v> {
-    v: [&'v Vertex; 3],
-    /// Its third vertex's row and column.
-    r2: f64,
-    c2: f64,
-    /// `[r1 - r2, c2 - c1, r2 - r0, c0 - c2]`, times the sign of the
-    /// denominator.
-    steps: [f64; 4],
-    /// `|(r1 - r2)(c0 - c2) + (c2 - c1)(r0 - r2)|`, twice the area.
-    denominator: f64,
-    /// How far outside, in the weights' units times `denominator`, a ray
-    /// still counts as inside.
-    tolerance: f64,
-    edge: bool,
+/// The range `lo..=hi` of rows (or columns) without those at its ends
+/// whose rays all lie short of `[min, max]` by their band's reach: the
+/// box's global reach comes from a few stray rays, and a row of rays
+/// within a tenth of their row (most of KITTI's) holds none of a quad
+/// whose rows begin half a row past it. (Rows in between are kept: they
+/// hold rays in the box, or, rarely, ones the weights reject.) `lo > hi`
+/// where none is left.
+#[inline]
+fn within_bands(
+    bands: &[Reach],
+    (mut lo, mut hi): (usize, usize),
+    (min, max): (f64, f64),
+) -> (usize, usize) {
+    while lo <= hi && lo as f64 + bands[lo].after + REACH_SLACK < min {
+        lo += 1;
+    }
+    while hi > lo && hi as f64 - bands[hi].before - REACH_SLACK > max {
+        hi -= 1;
+    }
+    (lo, hi)
 }
-
-impl<'v> FlatTriangle<'v> {
-    /// The triangle at its vertices' own coordinates (away from the seam).
-    #[inline]
-    fn set_up(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
-        let (r, c) = (
-            [v[0].row, v[1].row, v[2].row],
-            [v[0].col, v[1].col, v[2].col],
-        );
-        Self::at(v, (&r, &c), edge)
-    }
-
-    /// `None` for a triangle the renderer skips: wider than
-    /// [`MAX_SPAN_CELLS`] (a bridge) or degenerate. Rows `r` and
-    /// (unwrapped) columns `c` of vertices `v`.
-    #[inline]
-    fn at(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
-        let (r_min, r_max) = (least(least(r[0], r[1]), r[2]), most(most(r[0], r[1]), r[2]));
-        let (c_min, c_max) = (least(least(c[0], c[1]), c[2]), most(most(c[0], c[1]), c[2]));
-        if r_max - r_min > MAX_SPAN_CELLS || c_max - c_min > MAX_SPAN_CELLS {
-            return None;
-        }
-        Self::spanning(v, (r, c), edge)
-    }
-
-    /// [`Self::set_up`] for a triangle known to span no more than
-    /// [`MAX_SPAN_CELLS`] (its quad's box does not).
-    #[inline]
-    fn narrow(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
-        let (r, c) = (
-            [v[0].row, v[1].row, v[2].row],
-            [v[0].col, v[1].col, v[2].col],
-        );
-        Self::spanning(v, (&r, &c), edge)
-    }
-
-    /// The set-up once the span is checked: `None` where degenerate.
-    #[inline]
-    fn spanning(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
-        let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
-        if denominator.abs() < 1e-12 {
-            return None;
-        }
-        let sign = if denominator < 0.0 { -1.0 } else { 1.0 };
-        Some(Self {
-            v,
-            r2: r[2],
-            c2: c[2],
-            steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
-            denominator: denominator.abs(),
-            tolerance: EDGE_WEIGHT * denominator.abs(),
-            edge,
-        })
-    }
-
-    /// The barycentric weights of `(tr, tc)`, where it lies inside (to
-    /// [`EDGE_WEIGHT`]), the first tested before the second is computed.
-    #[inline]
-    fn weights(&self, tr: f64, tc: f64) -> Option<[f64; 3]> {
-        let (dc, dr) = (tc - self.c2, tr - self.r2);
-        let [k0, k1, k2, k3] = self.steps;
-        let s0 = k0 * dc + k1 * dr;
-        if s0 < -self.tolerance {
-            return None;
-        }
-        let s1 = k2 * dc + k3 * dr;
-        let s2 = self.denominator - s0 - s1;
-        if s1 < -self.tolerance || s2 < -self.tolerance {
-            return None;
-        }
-        let inverse = 1.0 / self.denominator;
-        let (w0, w1) = (s0 * inverse, s1 * inverse);
-        Some([w0, w1, 1.0 - w0 - w1])
-    }
-}
-
-/// How far outside a triangle, in barycentric weight, a ray is still taken
-/// as inside (so that a ray on the edge two triangles share is in both).
-const EDGE_WEIGHT: f64 = 1e-9;
 
 /// The candidate of target `cell`, whose ray falls inside triangle `v`
 /// with barycentric weights `w`: the range where it meets the triangle's
