@@ -301,3 +301,61 @@ fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
         assert_eq!(got, wanted, "cell {cell}");
     }
 }
+
+/// Scatter matrices of 15 points spread over 0.3 x 0.2 m with a thickness
+/// giving a smallest eigenvalue of 1e-6 to 0.4 of the middle one.
+fn thickening_planes() -> Vec<(f64, Matrix3<f64>)> {
+    let mut uniform = uniform_numbers();
+    let normal = Vector3::new(0.3, -0.2, 0.9).normalize();
+    let u = normal.cross(&Vector3::x()).normalize();
+    let v = normal.cross(&u);
+    let base = Vector3::new(12.0, -3.0, 0.5);
+    [1e-3, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.6]
+        .iter()
+        .flat_map(|&thickness| std::iter::repeat_n(thickness, 40))
+        .map(|thickness| {
+            let points: Vec<Vector3<f64>> = (0..15)
+                .map(|_| {
+                    base + u * uniform() * 0.3
+                        + v * uniform() * 0.2
+                        + normal * uniform() * 0.2 * thickness
+                })
+                .collect();
+            let covariance = scatter(&points).1;
+            let (a, b, _) = symmetric_eigenvalues(&covariance).unwrap();
+            (a / b, covariance)
+        })
+        .collect()
+}
+
+/// `plane_of_scatter`'s fixed Newton steps against the eigenvalues iterated
+/// to convergence: the normal within `128 (a / b)^8` rad (and 1e-9), the
+/// spread within as much relative times `c / (c - b)` (and 1e-6), and the scatter along the normal never
+/// below the smallest eigenvalue and within `1e-6 + 128 (a / b)^8` of it
+/// relative (both but for rounding, 1e-14 of the trace).
+#[test]
+fn a_planes_fixed_newton_steps_match_the_converged_solve() {
+    for (case, (ratio, covariance)) in thickening_planes().into_iter().enumerate() {
+        let plane =
+            super::plane::plane_of_scatter(15.0, Vector3::zeros(), &covariance).expect("a plane");
+        let (a, b, c) = symmetric_eigenvalues(&covariance).unwrap();
+        let exact = super::plane::null_vector(&(covariance - Matrix3::identity() * a)).unwrap();
+        let bound = 128.0 * ratio.powi(8);
+        let angle = plane.normal.cross(&exact).norm();
+        assert!(angle <= bound + 1e-9, "{case} (a/b {ratio}): {angle} rad");
+        let spread = (b / 15.0).sqrt();
+        let spread_error = (plane.spread - spread).abs() / spread;
+        // The middle eigenvalue's error is the smallest's times `c / (c - b)`.
+        assert!(
+            spread_error <= 1e-6 + bound * c / (c - b),
+            "{case}: {spread_error}"
+        );
+        // Rounding: 1e-14 of the trace.
+        let rounding = 1e-14 * covariance.trace();
+        assert!(plane.smallest >= a - rounding, "{case}");
+        assert!(
+            plane.smallest <= a * (1.0 + 1e-6 + bound) + rounding,
+            "{case}"
+        );
+    }
+}
