@@ -65,32 +65,12 @@ impl EgoEstimate {
         if range_m <= 0.0 || facing_cos <= 0.0 {
             return f64::INFINITY;
         }
-        let arm = point_m.cross(&normal);
-        let gradient = [arm.x, arm.y, arm.z, normal.x, normal.y, normal.z];
-        let variance = quadratic_form(&self.covariance, &gradient).max(0.0);
+        let gradient =
+            Vector6::from_iterator(point_m.cross(&normal).iter().chain(normal.iter()).copied());
+        let covariance = Matrix6::from_fn(|i, j| self.covariance[i][j]);
+        let variance = (gradient.transpose() * covariance * gradient)[(0, 0)].max(0.0);
         variance.sqrt() / (facing_cos * range_m)
     }
-}
-
-/// `g^T C g`, summed in the order nalgebra's `g.transpose() * C * g` sums
-/// (the row `g^T C` column by column, each term by term, then its product
-/// with `g`), so the result is bit for bit the same (the covariance, a
-/// product of matrices, need not be exactly symmetric); written out
-/// because this runs for every cell of a pair whose motion was estimated,
-/// where building the matrix and the generic products cost 2.5 ms per pair.
-fn quadratic_form(c: &[[f64; 6]; 6], g: &[f64; 6]) -> f64 {
-    let row: [f64; 6] = std::array::from_fn(|j| {
-        let mut sum = g[0] * c[0][j];
-        for i in 1..6 {
-            sum += g[i] * c[i][j];
-        }
-        sum
-    });
-    let mut form = row[0] * g[0];
-    for j in 1..6 {
-        form += row[j] * g[j];
-    }
-    form
 }
 
 /// One cell's equation.
@@ -537,44 +517,5 @@ fn with_constant_motion(
         ),
         angular: Some(motion.angular.clone().unwrap_or_else(|| constant(angular))),
         ..motion.clone()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::test_rng::SplitMix64;
-
-    /// The written-out form is nalgebra's `g^T C g` bit for bit, on
-    /// covariances of every scale and sign pattern, symmetric but for
-    /// rounding (zero rows for what a source measured included).
-    #[test]
-    // (Indices: the upper triangle and its mirror.)
-    #[allow(clippy::needless_range_loop)]
-    fn the_quadratic_form_is_nalgebras_bit_for_bit() {
-        let mut rng = SplitMix64(26);
-        for case in 0..20_000 {
-            let scale = 10f64.powf(rng.uniform(-8.0, 2.0));
-            let mut c = [[0.0; 6]; 6];
-            for i in 0..6 {
-                for j in i..6 {
-                    c[i][j] = scale * rng.signed();
-                    // Symmetric but for rounding, as a computed covariance.
-                    c[j][i] = c[i][j] * (1.0 + 1e-15 * rng.signed());
-                }
-            }
-            if case % 3 == 0 {
-                c[0] = [0.0; 6];
-                (0..6).for_each(|i| c[i][0] = 0.0);
-            }
-            let g: [f64; 6] = std::array::from_fn(|_| 50.0 * rng.signed());
-            let (gv, cm) = (Vector6::from(g), Matrix6::from_fn(|i, j| c[i][j]));
-            let expected = (gv.transpose() * cm * gv)[(0, 0)];
-            assert_eq!(
-                quadratic_form(&c, &g).to_bits(),
-                expected.to_bits(),
-                "{c:?} {g:?}"
-            );
-        }
     }
 }
