@@ -32,9 +32,23 @@ pub(crate) const LEVELS: f32 = STEPS as f32;
 pub fn looming(looming_per_s: f32) -> Rgba {
     match looming_step(looming_per_s) {
         None => MASKED,
-        Some(step) => step_colour(step),
+        Some(step) => STEP_COLOURS[usize::from(step.approaching)][usize::from(step.level)],
     }
 }
+
+/// [`step_colour`] of every step (receding, then approaching), worked out
+/// once: the cloud colours every point of every scan.
+static STEP_COLOURS: std::sync::LazyLock<[[Rgba; STEPS as usize + 1]; 2]> =
+    std::sync::LazyLock::new(|| {
+        std::array::from_fn(|approaching| {
+            std::array::from_fn(|level| {
+                step_colour(Step {
+                    approaching: approaching == 1,
+                    level: level as u8,
+                })
+            })
+        })
+    });
 
 /// One colour of the looming scale: the sign of the value and its intensity
 /// step, 0 (zero looming, [`ZERO`] whatever the sign) to [`STEPS`] (full).
@@ -164,6 +178,17 @@ mod tests {
         assert_eq!(looming(0.2500), looming(0.2501));
         let (weak, strong) = (looming(0.1), looming(0.5));
         assert!(weak[0] < strong[0] && weak[1] > strong[1]);
+    }
+
+    /// The table of step colours gives each value the blend of its step.
+    #[test]
+    fn tabled_colours_are_the_blends_of_their_steps() {
+        for k in -2200..=2200 {
+            let value = k as f32 / 1000.0;
+            let step = looming_step(value).unwrap();
+            assert_eq!(looming(value), step_colour(step), "{value}");
+        }
+        assert_eq!(looming(f32::INFINITY), MASKED);
     }
 
     #[test]

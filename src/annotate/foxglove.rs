@@ -98,8 +98,8 @@ impl Packer {
     }
     /// Positions rounded to [`POSITION_QUANTUM_M`].
     fn xyz(&mut self, p: &[f32; 3]) -> &mut Self {
-        let q = |v: f32| (v / POSITION_QUANTUM_M).round() * POSITION_QUANTUM_M;
-        self.f32(q(p[0])).f32(q(p[1])).f32(q(p[2]))
+        self.data.extend_from_slice(&quantized_xyz(p));
+        self
     }
     fn rgba(&mut self, c: Rgba) -> &mut Self {
         self.data.extend_from_slice(&c);
@@ -163,6 +163,19 @@ pub const POSITION_QUANTUM_M: f32 = 1.0 / 1024.0;
 /// field to a fraction.
 pub(crate) const LOOMING_QUANTUM_PER_S: f32 = 1.0 / 1024.0;
 
+/// A position rounded to [`POSITION_QUANTUM_M`], as its three fields' bytes
+/// (one append per point, not one per coordinate: every point of every
+/// scan).
+fn quantized_xyz(p: &[f32; 3]) -> [u8; 12] {
+    let q = |v: f32| ((v / POSITION_QUANTUM_M).round() * POSITION_QUANTUM_M).to_le_bytes();
+    let [x, y, z] = p.map(q);
+    let mut bytes = [0; 12];
+    bytes[..4].copy_from_slice(&x);
+    bytes[4..8].copy_from_slice(&y);
+    bytes[8..].copy_from_slice(&z);
+    bytes
+}
+
 fn quantized(looming_per_s: f32) -> f32 {
     (looming_per_s / LOOMING_QUANTUM_PER_S).round() * LOOMING_QUANTUM_PER_S
 }
@@ -192,7 +205,12 @@ pub(crate) fn looming_cloud(
         let cell = looming.image.surface_cell(index);
         let trusted = cell.filter(|&c| looming.mask[c] == 0);
         let fused = trusted.map_or(f32::NAN, |c| quantized(looming.fused[c]));
-        out.xyz(p).f32(fused).rgba(colour::looming(fused));
+        // The default fields as one record, appended at once.
+        let mut record = [0u8; 20];
+        record[..12].copy_from_slice(&quantized_xyz(p));
+        record[12..16].copy_from_slice(&fused.to_le_bytes());
+        record[16..].copy_from_slice(&colour::looming(fused));
+        out.data.extend_from_slice(&record);
         if fields == FieldSet::Full {
             let at = |values: &[f32]| cell.map_or(f32::NAN, |c| quantized(values[c]));
             out.f32(at(&looming.l_lidar))

@@ -119,13 +119,18 @@ pub fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f6
 /// z, and the return below the sensor.
 fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3])> {
     let min_cos = GROUND_MAX_TILT_DEG.to_radians().cos();
+    // The normal first: it lies in a dense array, where the return is a
+    // lookup in the scan, wanted only for cells facing up.
     (0..looming.mask.len())
         .filter_map(|cell| {
-            let p = cell_point(looming, scan, cell)?;
             let n = looming.normal.get(cell)?;
             let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
-            (upward && p[2] < 0.0).then_some((cell, p))
+            if !upward {
+                return None;
+            }
+            let p = cell_point(looming, scan, cell)?;
+            (p[2] < 0.0).then_some((cell, p))
         })
         .collect()
 }

@@ -39,9 +39,11 @@ pub fn segment(
         queue.push_back(seed);
         while let Some(cell) = queue.pop_front() {
             members.push(cell);
-            let here = points[cell].expect("queued cells have a point");
+            let here = points[cell]
+                .expect("queued cells have a point")
+                .map(f64::from);
             for (neighbour, between) in neighbours(cell, rows, cols) {
-                let Some(there) = points[neighbour] else {
+                let Some(there) = points[neighbour].map(|p| p.map(f64::from)) else {
                     continue;
                 };
                 // Two columns away only across a dropout, never across
@@ -68,12 +70,14 @@ pub fn segment(
 }
 
 /// The returns that may belong to an object: above the ground, in range.
+/// Kept as the scan's `f32` (exactly what `cell_point` widened): half the
+/// memory the search reads six times per cell, at random across rows.
 fn object_candidates(
     scan: &Scan,
     looming: &PairLooming,
     ground: Option<&GroundFit>,
     config: &ObjectConfig,
-) -> Vec<Option<[f64; 3]>> {
+) -> Vec<Option<[f32; 3]>> {
     (0..looming.mask.len())
         .map(|cell| {
             let p = cell_point(looming, scan, cell)?;
@@ -81,7 +85,8 @@ fn object_candidates(
             let height = ground
                 .as_ref()
                 .map_or(f64::INFINITY, |g| g.height_above(&p));
-            (range <= config.max_range_m && height >= config.min_height_m).then_some(p)
+            (range <= config.max_range_m && height >= config.min_height_m)
+                .then_some(p.map(|v| v as f32))
         })
         .collect()
 }
