@@ -107,7 +107,7 @@ pub(super) fn plane_of_scatter(
     centroid: Vector3<f64>,
     covariance: &Matrix3<f64>,
 ) -> Option<Plane> {
-    let (smallest, middle, largest) = plane_eigenvalues(covariance)?;
+    let (smallest, middle, largest) = symmetric_eigenvalues(covariance)?;
     // Collinear points (one row only) do not define a plane.
     if largest.is_nan() || largest <= 0.0 || middle < 1e-3 * largest || !smallest.is_finite() {
         return None;
@@ -117,60 +117,8 @@ pub(super) fn plane_of_scatter(
         normal,
         centroid,
         spread: (middle.max(0.0) / count).sqrt(),
-        // The scatter along the normal (the Rayleigh quotient): never below
-        // the smallest eigenvalue, so `window_on_plane`'s test that the
-        // returns' squared distances sum below a bound stays on the safe
-        // side however few Newton steps `plane_eigenvalues` took.
-        smallest: normal.dot(&(covariance * normal)),
+        smallest,
     })
-}
-
-/// [`symmetric_eigenvalues`] for [`plane_of_scatter`]: the smallest by
-/// [`PLANE_NEWTON_STEPS`] Newton steps after the first, whatever their
-/// size, instead of until they converge. The loop's varying count of
-/// divisions and its mispredicted exit were most of the fits' eigen solve.
-/// Newton's error from `det / minors` is about `2 a^2 / b` (eigenvalues
-/// `a < b`), then squares at each step over `b / 2`: after two more steps
-/// `128 (a / b)^8 b`, which turns the normal by `128 (a / b)^8` rad (3e-4 at
-/// `a = b / 5`, the thinnest plane a window of 15 keeps before growing; its
-/// normal's own noise is some 0.1 rad).
-fn plane_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)> {
-    let trace = a.trace();
-    let minors = principal_minors(a);
-    let det = a.determinant();
-    if !(trace.is_finite() && minors.is_finite() && det.is_finite()) {
-        return None;
-    }
-    let mut smallest = 0.0f64;
-    if minors > 0.0 && det > 0.0 {
-        smallest = det / minors;
-        for _ in 0..PLANE_NEWTON_STEPS {
-            let value = ((smallest - trace) * smallest + minors) * smallest - det;
-            let slope = (3.0 * smallest - 2.0 * trace) * smallest + minors;
-            // Below the smallest root the slope is positive; zero at a
-            // double root (a line), where the step would be 0 / 0.
-            if slope > 0.0 {
-                smallest -= value / slope;
-            }
-        }
-    }
-    Some(other_eigenvalues(smallest, trace, minors))
-}
-
-/// Newton steps of [`plane_eigenvalues`] after the first.
-const PLANE_NEWTON_STEPS: usize = 2;
-
-/// The eigenvalues, ascending, of a symmetric 3x3 matrix with `trace` and
-/// sum of principal minors `minors` whose smallest is `smallest`: the other
-/// two sum to `trace - smallest`, their product `minors - smallest * sum`.
-#[inline]
-fn other_eigenvalues(smallest: f64, trace: f64, minors: f64) -> (f64, f64, f64) {
-    let sum = trace - smallest;
-    let product = minors - smallest * sum;
-    let half_gap = (0.25 * sum * sum - product).max(0.0).sqrt();
-    let middle = 0.5 * sum - half_gap;
-    let largest = 0.5 * sum + half_gap;
-    (smallest, middle.max(smallest), largest)
 }
 
 /// Eigenvalues of a symmetric positive semi-definite 3x3 matrix (a scatter
@@ -197,7 +145,13 @@ pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)>
             smallest = newton_from(smallest, (trace, minors, det), NEWTON_CONVERGED);
         }
     }
-    Some(other_eigenvalues(smallest, trace, minors))
+    // The other two: sum `trace - smallest`, product `minors - smallest * sum`.
+    let sum = trace - smallest;
+    let product = minors - smallest * sum;
+    let half_gap = (0.25 * sum * sum - product).max(0.0).sqrt();
+    let middle = 0.5 * sum - half_gap;
+    let largest = 0.5 * sum + half_gap;
+    Some((smallest, middle.max(smallest), largest))
 }
 
 /// Newton's iteration for the smallest root of the characteristic
@@ -237,7 +191,7 @@ const NEWTON_CONVERGED: f64 = 1e-10;
 
 /// A unit vector in the null space of a (nearly) singular symmetric matrix: the
 /// largest cross product of two of its rows.
-pub(super) fn null_vector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
+fn null_vector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
     let rows = [
         Vector3::new(m[(0, 0)], m[(0, 1)], m[(0, 2)]),
         Vector3::new(m[(1, 0)], m[(1, 1)], m[(1, 2)]),
