@@ -551,11 +551,8 @@ mod tests {
         };
         let mut state = 3u64;
         for _ in 0..200_000 {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
             // Magnitudes from 1e-6 to 1e3, either sign.
-            let exponent = (state >> 11) as f64 / (1u64 << 53) as f64 * 9.0 - 6.0;
+            let exponent = next_unit(&mut state) * 9.0 - 6.0;
             let value = 10f64.powf(exponent) * if state & 1 == 0 { 1.0 } else { -1.0 };
             let fractional = (exponent + 4.0) * HIST_BINS_PER_DECADE;
             if (fractional - fractional.round()).abs() < 1e-9 {
@@ -565,6 +562,15 @@ mod tests {
         }
         assert_eq!(AbsHistogram::bin(0.0), 0);
         assert_eq!(AbsHistogram::bin(1e9), HIST_LAST_BIN);
+    }
+
+    /// The next of a linear congruential sequence (Knuth's MMIX constants)
+    /// as a value in [0, 1): the histogram tests' reproducible magnitudes.
+    fn next_unit(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
     }
 
     /// The slot table gives the binary search's bin exactly: at every edge,
@@ -586,10 +592,7 @@ mod tests {
         }
         let mut state = 11u64;
         for _ in 0..100_000 {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            let exponent = (state >> 11) as f64 / (1u64 << 53) as f64 * 12.0 - 7.0;
+            let exponent = next_unit(&mut state) * 12.0 - 7.0;
             values.push(10f64.powf(exponent));
         }
         for value in values {

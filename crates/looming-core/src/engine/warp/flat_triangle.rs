@@ -31,10 +31,7 @@ impl<'v> FlatTriangle<'v> {
     /// The triangle at its vertices' own coordinates (away from the seam).
     #[inline]
     pub fn set_up(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
-        let (r, c) = (
-            [v[0].row, v[1].row, v[2].row],
-            [v[0].col, v[1].col, v[2].col],
-        );
+        let (r, c) = coords(v);
         Self::at(v, (&r, &c), edge)
     }
 
@@ -55,10 +52,7 @@ impl<'v> FlatTriangle<'v> {
     /// [`MAX_SPAN_CELLS`] (its quad's box does not).
     #[inline]
     pub fn narrow(v: [&'v Vertex; 3], edge: bool) -> Option<Self> {
-        let (r, c) = (
-            [v[0].row, v[1].row, v[2].row],
-            [v[0].col, v[1].col, v[2].col],
-        );
+        let (r, c) = coords(v);
         Self::spanning(v, (&r, &c), edge)
     }
 
@@ -119,6 +113,12 @@ impl<'v> FlatTriangle<'v> {
         let (w0, w1) = (s0 * inverse, s1 * inverse);
         Some([w0, w1, 1.0 - w0 - w1])
     }
+}
+
+/// The rows and columns of a triangle's vertices.
+#[inline(always)]
+fn coords(v: [&Vertex; 3]) -> ([f64; 3], [f64; 3]) {
+    (v.map(|v| v.row), v.map(|v| v.col))
 }
 
 /// How far outside a triangle, in barycentric weight, a ray is still taken
