@@ -102,6 +102,18 @@ impl Bands {
         }
         bands
     }
+
+    /// The largest distance, in rows and in columns (across the seam), of
+    /// an occupied cell's coordinates from the cell's own row and column:
+    /// the furthest of the bands' (0 for an empty image).
+    fn reach(&self) -> (f64, f64) {
+        let furthest = |reaches: &[Reach]| {
+            reaches
+                .iter()
+                .fold(0.0f64, |far, r| far.max(r.before).max(r.after))
+        };
+        (furthest(&self.rows), furthest(&self.cols))
+    }
 }
 
 /// Column coordinate `col_f`'s offset from column `col`, across the seam.
@@ -122,30 +134,15 @@ impl<'a> Target<'a> {
         coords: &'a [(f32, f32)],
         column_time_ns: &'a [StampNs],
     ) -> Self {
+        let bands = Bands::of(surfaces, coords);
         Self {
             surfaces,
             coords,
             column_time_ns,
-            reach: coords_reach(surfaces, coords),
-            bands: Bands::of(surfaces, coords),
+            reach: bands.reach(),
+            bands,
         }
     }
-}
-
-/// The largest distance, in rows and in columns (across the seam), of an
-/// occupied cell's coordinates from the cell's own row and column.
-fn coords_reach(surfaces: &Surfaces, coords: &[(f32, f32)]) -> (f64, f64) {
-    let cols = surfaces.cols;
-    coords
-        .par_iter()
-        .enumerate()
-        .filter(|(cell, _)| surfaces.range_m[*cell].is_finite())
-        .map(|(cell, &(row_f, col_f))| {
-            let row = (cell / cols) as f64;
-            let col_off = col_offset(col_f, cell % cols, cols);
-            ((f64::from(row_f) - row).abs(), col_off.abs())
-        })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
 }
 
 /// Added to a target's reach: a ray passes the triangle test up to its
