@@ -9,7 +9,7 @@ use crate::model::{PairMotion, StampNs};
 
 use super::config::EngineConfig;
 use super::egomotion::EgoEstimate;
-use super::grid::ImageGeometry;
+use super::grid::{ImageGeometry, wrapped_around};
 use super::result::mask;
 use super::surface::Surfaces;
 use super::threat::ThreatLevel;
@@ -209,35 +209,18 @@ fn moving_patches(geometry: &ImageGeometry, candidate: &[bool]) -> Vec<bool> {
         .enumerate()
         .for_each(|(row, moving_row)| {
             let window = NeighbourRows::of(geometry, row);
-            let others = window.starts[..window.count]
-                .iter()
-                .filter(|(offset, _)| *offset != 0)
-                .map(|&(_, start)| start);
-            let (mut above_below, mut count) = ([0; 2], 0);
-            for start in others {
-                above_below[count] = start;
-                count += 1;
-            }
+            let rows = &window.starts[..window.count];
             for (col, moving) in moving_row.iter_mut().enumerate() {
                 if !candidate[row * cols + col] {
                     continue;
                 }
                 let around = wrapped_around(col, cols);
-                *moving = above_below[..count]
-                    .iter()
-                    .any(|&start| around.iter().any(|&c| candidate[start + c]));
+                *moving = rows.iter().any(|&(offset, start)| {
+                    offset != 0 && around.iter().any(|&c| candidate[start + c])
+                });
             }
         });
     moving
-}
-
-/// The columns left of, at and right of `col`, wrapping around the sweep.
-fn wrapped_around(col: usize, cols: usize) -> [usize; 3] {
-    [
-        if col == 0 { cols - 1 } else { col - 1 },
-        col,
-        if col + 1 == cols { 0 } else { col + 1 },
-    ]
 }
 
 /// On the static world neighbouring cells see one smooth looming field: a

@@ -204,6 +204,16 @@ pub(super) fn wrap_col(col: i64, cols: i64) -> usize {
     }
 }
 
+/// The columns left of, at and right of `col`, wrapping around the sweep
+/// (the per-cell passes' 3x3 windows, without a division).
+pub(super) fn wrapped_around(col: usize, cols: usize) -> [usize; 3] {
+    [
+        if col == 0 { cols - 1 } else { col - 1 },
+        col,
+        if col + 1 == cols { 0 } else { col + 1 },
+    ]
+}
+
 /// Azimuth and elevation of a point.
 #[inline]
 pub fn angles(p: &[f32; 3]) -> (f64, f64) {
