@@ -9,7 +9,7 @@ use crate::model::{PairMotion, StampNs};
 
 use super::config::EngineConfig;
 use super::egomotion::EgoEstimate;
-use super::grid::ImageGeometry;
+use super::grid::{ImageGeometry, wrapped_around};
 use super::result::mask;
 use super::surface::Surfaces;
 use super::threat::ThreatLevel;
@@ -200,16 +200,27 @@ fn raw_cells(
 /// one-beam line (what the junction of road and wall leaves): keep
 /// candidates with two candidate neighbours, one of them on another beam.
 fn moving_patches(geometry: &ImageGeometry, candidate: &[bool]) -> Vec<bool> {
-    (0..geometry.cells())
-        .into_par_iter()
-        .map(|cell| {
-            let row = cell / geometry.cols;
-            candidate[cell]
-                && geometry
-                    .neighbours_3x3(cell)
-                    .any(|n| candidate[n] && n / geometry.cols != row)
-        })
-        .collect()
+    let cols = geometry.cols;
+    let mut moving = vec![false; geometry.cells()];
+    // Row by row, as in `smoothed_static`: the rows above and below and the
+    // wrapped columns once per row and cell, not by divisions per neighbour.
+    moving
+        .par_chunks_mut(cols)
+        .enumerate()
+        .for_each(|(row, moving_row)| {
+            let window = NeighbourRows::of(geometry, row);
+            let rows = &window.starts[..window.count];
+            for (col, moving) in moving_row.iter_mut().enumerate() {
+                if !candidate[row * cols + col] {
+                    continue;
+                }
+                let around = wrapped_around(col, cols);
+                *moving = rows.iter().any(|&(offset, start)| {
+                    offset != 0 && around.iter().any(|&c| candidate[start + c])
+                });
+            }
+        });
+    moving
 }
 
 /// On the static world neighbouring cells see one smooth looming field: a
@@ -289,11 +300,7 @@ fn static_median(
 ) -> f32 {
     let cols = window.cols;
     let normal = current.normal[cell];
-    let around = [
-        if col == 0 { cols - 1 } else { col - 1 },
-        col,
-        if col + 1 == cols { 0 } else { col + 1 },
-    ];
+    let around = wrapped_around(col, cols);
     let mut values = [0.0f32; 9];
     values[0] = pointwise[cell];
     let mut count = 1;

@@ -204,6 +204,16 @@ pub(super) fn wrap_col(col: i64, cols: i64) -> usize {
     }
 }
 
+/// The columns left of, at and right of `col`, wrapping around the sweep
+/// (the per-cell passes' 3x3 windows, without a division).
+pub(super) fn wrapped_around(col: usize, cols: usize) -> [usize; 3] {
+    [
+        if col == 0 { cols - 1 } else { col - 1 },
+        col,
+        if col + 1 == cols { 0 } else { col + 1 },
+    ]
+}
+
 /// Azimuth and elevation of a point.
 #[inline]
 pub fn angles(p: &[f32; 3]) -> (f64, f64) {
@@ -402,7 +412,15 @@ fn most_points_per_row(rows_of_points: impl Iterator<Item = usize>, rows: usize)
 /// elevation.
 fn ring_elevations(scan: &Scan, rows: usize) -> Option<(BeamTable, Vec<usize>, Option<Vec<f64>>)> {
     let rings = scan.ring.as_ref()?;
-    let mut per_ring: Vec<Vec<(f32, f32)>> = vec![Vec::new(); rows];
+    // Each ring's list made as long as it will be (its returns counted):
+    // pushed into from empty, the lists grew and copied several times.
+    let mut counts = vec![0usize; rows];
+    for &ring in rings {
+        if let Some(count) = counts.get_mut(usize::from(ring)) {
+            *count += 1;
+        }
+    }
+    let mut per_ring: Vec<Vec<(f32, f32)>> = counts.into_iter().map(Vec::with_capacity).collect();
     // The angles on both cores (an `atan2` per return), then bucketed in order.
     let values: Vec<(f32, f32)> = scan
         .points_m

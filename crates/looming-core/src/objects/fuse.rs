@@ -333,8 +333,24 @@ fn measured_face(
 fn consistent(looming: &PairLooming, cell: usize, (value, se): (f64, f64), scale: f64) -> bool {
     let sigma = f64::from(looming.fused_sigma_per_s[cell]) * scale;
     let apart = (f64::from(looming.fused[cell]) - value).abs();
-    apart <= CONSISTENT_SIGMAS * sigma.hypot(se)
-        && apart <= MAX_APART_FRACTION * value.abs() + MAX_APART_PER_S
+    // The cheap bound first: it needs no root.
+    apart <= MAX_APART_FRACTION * value.abs() + MAX_APART_PER_S
+        && within_hypot(apart, CONSISTENT_SIGMAS, (sigma, se))
+}
+
+/// `apart <= k * a.hypot(b)`, exactly, with libm's `hypot` (a tenth of the
+/// objects stage: every cell of every object, up to three times) called
+/// only where the plain root of the squares, within a few ulps of it where
+/// the squares are normal numbers, leaves the verdict in doubt.
+fn within_hypot(apart: f64, k: f64, (a, b): (f64, f64)) -> bool {
+    let squares = a * a + b * b;
+    let bound = k * squares.sqrt();
+    let normal = (1e-290..1e290).contains(&squares);
+    if normal && (apart - bound).abs() > 1e-12 * bound {
+        apart <= bound
+    } else {
+        apart <= k * a.hypot(b)
+    }
 }
 
 /// Whether the cell's own measurement (`L_lidar`; its fused value may come
@@ -438,6 +454,45 @@ fn refresh_point_threats(looming: &mut PairLooming) {
     for (point, &cell) in looming.image.point_surface.iter().enumerate() {
         if let Some(threat) = looming.threat.get(cell as usize) {
             looming.point_threat[point] = *threat;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The root of the squares decides as `hypot` does, at the bound's
+    /// ulps and at values beyond the squares' range.
+    #[test]
+    fn the_bound_without_hypot_is_hypots_verdict() {
+        let mut rng = crate::test_rng::SplitMix64(26);
+        let specials = [0.0, 1e-200, 1e200, f64::INFINITY, f64::NAN, 1e-3, 0.5];
+        for case in 0..200_000 {
+            let mut pick = || {
+                if case % 5 == 0 {
+                    specials[(rng.uniform(0.0, specials.len() as f64)) as usize % specials.len()]
+                } else {
+                    10f64.powf(rng.uniform(-6.0, 2.0))
+                }
+            };
+            let (a, b) = (pick(), pick());
+            let exact = 3.0 * a.hypot(b);
+            // At the bound, an ulp either side, and further away.
+            for apart in [
+                exact,
+                f64::from_bits(exact.to_bits().wrapping_add(1)),
+                f64::from_bits(exact.to_bits().wrapping_sub(1)),
+                exact * 0.9,
+                exact * 1.1,
+                pick(),
+            ] {
+                assert_eq!(
+                    within_hypot(apart, 3.0, (a, b)),
+                    apart <= exact,
+                    "{apart} {a} {b}"
+                );
+            }
         }
     }
 }

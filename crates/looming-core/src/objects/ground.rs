@@ -41,17 +41,14 @@ impl GroundFit {
         let candidates = ground_candidates(looming, scan);
         let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
         let height = median(&mut heights)?;
-        let near_height: Vec<(usize, [f64; 3])> = candidates
-            .iter()
-            .filter(|(_, p)| {
-                (p[2] - height).abs()
-                    <= GROUND_HEIGHT_TOLERANCE_M + GROUND_HEIGHT_TOLERANCE_PER_M * horizontal(p)
-            })
-            .copied()
-            .collect();
-        let plane = (near_height.len() >= MIN_PLANE_CELLS)
-            .then(|| fit_plane(&near_height.iter().map(|(_, p)| *p).collect::<Vec<_>>()))
-            .flatten();
+        let near = |p: &[f64; 3]| {
+            (p[2] - height).abs()
+                <= GROUND_HEIGHT_TOLERANCE_M + GROUND_HEIGHT_TOLERANCE_PER_M * horizontal(p)
+        };
+        // The plane's sums straight from the candidates near the height
+        // (no list of them, wanted only where there are too few for a plane).
+        let (near_count, plane) = fit_plane(candidates.iter().map(|(_, p)| p).filter(|p| near(p)));
+        let plane = plane.filter(|_| near_count >= MIN_PLANE_CELLS);
         let cells = match plane {
             Some(plane) => candidates
                 .into_iter()
@@ -60,7 +57,7 @@ impl GroundFit {
                         <= GROUND_PLANE_TOLERANCE_M + GROUND_PLANE_TOLERANCE_PER_M * horizontal(p)
                 })
                 .collect(),
-            None => near_height,
+            None => candidates.into_iter().filter(|(_, p)| near(p)).collect(),
         };
         Some(Self {
             height_m: height,
@@ -135,20 +132,23 @@ fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3]
         .collect()
 }
 
-/// Least-squares plane `z = a x + b y + c` through the points.
-fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
+/// How many points there are, and the least-squares plane
+/// `z = a x + b y + c` through them.
+fn fit_plane<'a>(points: impl Iterator<Item = &'a [f64; 3]>) -> (usize, Option<[f64; 3]>) {
     let mut m = nalgebra::Matrix3::<f64>::zeros();
     let mut v = nalgebra::Vector3::<f64>::zeros();
+    let mut count = 0;
     for p in points {
         let row = nalgebra::Vector3::new(p[0], p[1], 1.0);
         m += row * row.transpose();
         v += row * p[2];
+        count += 1;
     }
-    let solution = m.try_inverse()? * v;
-    solution
-        .iter()
-        .all(|x| x.is_finite())
-        .then(|| [solution[0], solution[1], solution[2]])
+    let solution = m.try_inverse().map(|inverse| inverse * v);
+    let plane = solution
+        .filter(|s| s.iter().all(|x| x.is_finite()))
+        .map(|s| [s[0], s[1], s[2]]);
+    (count, plane)
 }
 
 #[cfg(test)]
