@@ -22,6 +22,7 @@ impl Surfaces {
         noise_m_per_row: &[f32],
     ) {
         let cols = geometry.cols.max(1);
+        let carry = cols >= CARRY_MIN_COLS;
         let band = cols * (geometry.rows / BANDS).clamp(1, MAX_BAND_ROWS);
         let bands = (
             self.range_m.par_chunks_mut(band),
@@ -46,8 +47,17 @@ impl Surfaces {
                             ..params
                         };
                         let at = row_start + tile..row_start + (tile + TILE_COLS).min(cols);
+                        // The growth the last non-empty cell to the left
+                        // settled on (`fit_cell`'s `first_grow`), on fine
+                        // grids only (`CARRY_MIN_COLS`).
+                        let mut left_grow = 1;
                         for at in at {
-                            let fit = fit_cell(returns, geometry, first + at, params, scratch);
+                            let cell = first + at;
+                            let (fit, grow) =
+                                fit_cell(returns, geometry, cell, params, scratch, left_grow);
+                            if carry && fit.range_m.is_finite() {
+                                left_grow = grow;
+                            }
                             range_m[at] = fit.range_m;
                             direction[at] = fit.direction;
                             normal[at] = fit.normal;
@@ -73,21 +83,38 @@ const MAX_BAND_ROWS: usize = 8;
 const BANDS: usize = 8;
 const TILE_COLS: usize = 64;
 
+/// Columns a scan needs for [`Surfaces::write_fits`] to start each cell's
+/// growth at its left neighbour's. Once a wide window is needed (a close
+/// object) the start carries on across the rest of the tile, and a wider
+/// window than a cell needs straddles more edges. On a fine grid (64 x
+/// 2048: a tile is 11 degrees) that cost nothing on the accuracy tables and
+/// fitted 43 % fewer windows; on a coarse one (32 x 512: 45 degrees) the
+/// crossing car's cells flagged moving fell from 106 to 30 (to 72 with
+/// the start taken from 3 beams again every fourth column).
+pub(super) const CARRY_MIN_COLS: usize = 1024;
+
 /// Fit the cell's plane in its window; where the window's points spread over
 /// less than a few noise sigmas in the plane (a close object seen by a dense
-/// sensor) the normal would be mostly noise, so the window grows (up to 7 beams).
+/// sensor) the normal would be mostly noise, so the window grows (up to 7
+/// beams). Growth starts at `first_grow` (1: 3 beams), and the growth the
+/// fit settled on comes back with it: [`Surfaces::write_fits`] starts each
+/// cell at its left neighbour's, as the spread needed comes with the range
+/// and the surface, which neighbours mostly share (on the synthetic 64 x
+/// 2048 log this fits 43 % fewer windows; 1.5 % of the cells get a wider
+/// window than they would growing from 3 beams).
 pub(super) fn fit_cell(
     returns: &Returns,
     geometry: &ImageGeometry,
     cell: usize,
     params: SurfaceParams,
     scratch: &mut Scratch,
-) -> CellSurface {
+    first_grow: usize,
+) -> (CellSurface, usize) {
     if params.sparse_rows {
-        return fit_ring_cell(returns, geometry, cell, params, scratch);
+        return (fit_ring_cell(returns, geometry, cell, params, scratch), 1);
     }
-    let mut best = EMPTY;
-    for grow in 1..=MAX_GROWTH {
+    let mut best = (EMPTY, 1);
+    for grow in first_grow.clamp(1, MAX_GROWTH)..=MAX_GROWTH {
         let window = (grow, grow * params.half_cols);
         let gated = gated_window(returns, geometry, cell, window);
         if grow < MAX_GROWTH && gated.as_ref().is_some_and(|g| too_narrow(g, params)) {
@@ -102,7 +129,7 @@ pub(super) fn fit_cell(
             gated.as_ref(),
             scratch,
         );
-        best = surface;
+        best = (surface, grow);
         if spread.is_none_or(|s| s >= 2.0 * params.range_noise_m) {
             break;
         }

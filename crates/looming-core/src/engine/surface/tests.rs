@@ -259,8 +259,16 @@ fn newtons_looser_stop_leaves_a_planes_smallest_eigenvalue_as_it_was() {
 
 #[test]
 fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
-    // 17 rows: bands of 2 rows and one of 1; 150 columns: tiles of 64, 64, 22.
-    let (rows, cols) = (17, 150);
+    // 17 rows: bands of 2 rows and one of 1; 150 columns: tiles of 64, 64,
+    // 22, each cell's growth from 3 beams (a coarse grid).
+    bands_and_tiles_fit_as_cell_by_cell(150);
+    // 1100 columns (a fine grid): the growth carried along each tile.
+    bands_and_tiles_fit_as_cell_by_cell(1100);
+}
+
+fn bands_and_tiles_fit_as_cell_by_cell(cols: usize) {
+    let rows = 17;
+    let carry = cols >= fits::CARRY_MIN_COLS;
     let (geometry, params, image) = dense_image(rows, cols, 0.02);
     let mut points = noisy_plane(rows, cols, 0.02, 0.5);
     for (cell, p) in points.iter_mut().enumerate() {
@@ -276,12 +284,25 @@ fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
     let mut surfaces = Surfaces::empty(rows * cols, cols);
     surfaces.write_fits(&returns, &geometry, params, &noise_m_per_row);
     let mut scratch = Scratch::default();
+    // On a fine grid each cell's growth starts at that of the last
+    // non-empty cell to its left in its tile (3 beams at the tile's first
+    // column), on a coarse one at 3 beams.
+    let mut left_grow = 1;
+    let mut grows = [0usize; 4];
     for cell in 0..rows * cols {
         let params = SurfaceParams {
             range_noise_m: f64::from(noise_m_per_row[cell / cols]),
             ..params
         };
-        let want = fits::fit_cell(&returns, &geometry, cell, params, &mut scratch);
+        if (cell % cols).is_multiple_of(64) {
+            left_grow = 1;
+        }
+        let (want, grow) =
+            fits::fit_cell(&returns, &geometry, cell, params, &mut scratch, left_grow);
+        if carry && want.range_m.is_finite() {
+            left_grow = grow;
+        }
+        grows[grow] += 1;
         let got = (
             surfaces.range_m[cell].to_bits(),
             surfaces.direction[cell].map(f32::to_bits),
@@ -300,4 +321,6 @@ fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
         );
         assert_eq!(got, wanted, "cell {cell}");
     }
+    // Some windows stayed at 3 beams, and the close object's grew.
+    assert!(grows[1] > 0 && grows[2] + grows[3] > 0, "{grows:?}");
 }
