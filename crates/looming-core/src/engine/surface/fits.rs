@@ -97,11 +97,11 @@ pub(super) const CARRY_MIN_COLS: usize = 1024;
 /// less than a few noise sigmas in the plane (a close object seen by a dense
 /// sensor) the normal would be mostly noise, so the window grows (up to 7
 /// beams). Growth starts at `first_grow` (1: 3 beams), and the growth the
-/// fit settled on comes back with it: on fine grids [`Surfaces::write_fits`]
-/// starts each cell at its left neighbour's, as the spread needed comes with
-/// the range and the surface, which neighbours mostly share (on the
-/// synthetic 64 x 2048 log this fits 43 % fewer windows; 1.5 % of the cells
-/// get a wider window than they would growing from 3 beams).
+/// fit settled on comes back with it: on fine grids ([`CARRY_MIN_COLS`])
+/// [`Surfaces::write_fits`] starts each cell at its left neighbour's, as the
+/// spread needed comes with the range and the surface, which neighbours
+/// mostly share (1.5 % of the synthetic 64 x 2048 log's cells get a wider
+/// window than they would growing from 3 beams).
 pub(super) fn fit_cell(
     returns: &Returns,
     geometry: &ImageGeometry,
