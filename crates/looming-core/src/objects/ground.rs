@@ -5,6 +5,8 @@
 //! or a sloped road keeps its ground). Objects are what stands above it;
 //! `looming::quality` judges the ego motion by its looming.
 
+use rayon::prelude::*;
+
 use crate::engine::{PairLooming, mask};
 use crate::model::Scan;
 
@@ -38,7 +40,12 @@ impl GroundFit {
     /// The ground of `scan` as the engine imaged it; `None` without a
     /// candidate cell.
     pub fn find(looming: &PairLooming, scan: &Scan) -> Option<Self> {
-        let candidates = ground_candidates(looming, scan);
+        Self::find_in(looming, &CellPoints::of(looming, scan))
+    }
+
+    /// [`GroundFit::find`] with the pair's cell returns already gathered.
+    pub fn find_in(looming: &PairLooming, points: &CellPoints) -> Option<Self> {
+        let candidates = ground_candidates(looming, points);
         let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
         let height = median(&mut heights)?;
         let near = |p: &[f64; 3]| {
@@ -103,6 +110,32 @@ fn height_above([a, b, c]: [f64; 3], p: &[f64; 3]) -> f64 {
     p[2] - (a * p[0] + b * p[1] + c)
 }
 
+/// The return of every range-image cell (its nearest, as [`cell_point`]
+/// gives it), gathered once per pair on both cores: the ground and the
+/// segmentation read every cell's, and a gather from the scan's points in
+/// cell order waits on a cache miss per cell (a third of the objects'
+/// stage, serial, read twice).
+pub struct CellPoints {
+    /// The scan's `f32` coordinates (exactly what `cell_point` widens).
+    points_m: Vec<Option<[f32; 3]>>,
+}
+
+impl CellPoints {
+    pub fn of(looming: &PairLooming, scan: &Scan) -> Self {
+        let points_m = (0..looming.mask.len())
+            .into_par_iter()
+            .map(|cell| cell_point(looming, scan, cell).map(|p| p.map(|v| v as f32)))
+            .collect();
+        Self { points_m }
+    }
+
+    /// The return of `cell`, as [`cell_point`] gives it.
+    #[inline]
+    pub fn get(&self, cell: usize) -> Option<[f64; 3]> {
+        self.points_m.get(cell)?.map(|p| p.map(f64::from))
+    }
+}
+
 pub fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f64; 3]> {
     if looming.mask[cell] & mask::EMPTY != 0 {
         return None;
@@ -114,7 +147,7 @@ pub fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f6
 
 /// Cells that may be ground: an upward normal within `GROUND_MAX_TILT_DEG` of
 /// z, and the return below the sensor.
-fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3])> {
+fn ground_candidates(looming: &PairLooming, points: &CellPoints) -> Vec<(usize, [f64; 3])> {
     let min_cos = GROUND_MAX_TILT_DEG.to_radians().cos();
     // The normal first: it lies in a dense array, where the return is a
     // lookup in the scan, wanted only for cells facing up.
@@ -126,7 +159,7 @@ fn ground_candidates(looming: &PairLooming, scan: &Scan) -> Vec<(usize, [f64; 3]
             if !upward {
                 return None;
             }
-            let p = cell_point(looming, scan, cell)?;
+            let p = points.get(cell)?;
             (p[2] < 0.0).then_some((cell, p))
         })
         .collect()

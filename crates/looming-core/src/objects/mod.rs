@@ -145,8 +145,9 @@ impl PairObjects {
     /// Find and measure the objects of a pair (ids not yet given: see
     /// [`ObjectTracker::update`]).
     pub fn find(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Self {
-        let ground = ground::GroundFit::find(looming, scan);
-        let cell_object = segment(scan, looming, ground.as_ref(), config);
+        let points = ground::CellPoints::of(looming, scan);
+        let ground = ground::GroundFit::find_in(looming, &points);
+        let cell_object = segment(&points, looming, ground.as_ref(), config);
         let objects = measure_objects(scan, looming, &cell_object);
         Self {
             ground,

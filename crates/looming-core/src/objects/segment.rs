@@ -8,21 +8,20 @@
 
 use std::collections::VecDeque;
 
-use super::ground::{GroundFit, cell_point};
+use super::ground::{CellPoints, GroundFit};
 use super::{NO_OBJECT, ObjectConfig};
 use crate::engine::PairLooming;
-use crate::model::Scan;
 
 /// Per cell, the index of its object (in order of discovery), or
 /// [`NO_OBJECT`].
 pub fn segment(
-    scan: &Scan,
+    points: &CellPoints,
     looming: &PairLooming,
     ground: Option<&GroundFit>,
     config: &ObjectConfig,
 ) -> Vec<u32> {
     let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
-    let points = object_candidates(scan, looming, ground, config);
+    let points = object_candidates(points, looming, ground, config);
     let mut label = vec![NO_OBJECT; rows * cols];
     // Visited by a search (an object's, or a group too small to be one).
     let mut visited = vec![false; rows * cols];
@@ -73,14 +72,14 @@ pub fn segment(
 /// Kept as the scan's `f32` (exactly what `cell_point` widened): half the
 /// memory the search reads six times per cell, at random across rows.
 fn object_candidates(
-    scan: &Scan,
+    points: &CellPoints,
     looming: &PairLooming,
     ground: Option<&GroundFit>,
     config: &ObjectConfig,
 ) -> Vec<Option<[f32; 3]>> {
     (0..looming.mask.len())
         .map(|cell| {
-            let p = cell_point(looming, scan, cell)?;
+            let p = points.get(cell)?;
             let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
             let height = ground
                 .as_ref()
