@@ -25,13 +25,14 @@ pub(super) fn fill_dropouts(
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
     let mut bridged_row = vec![false; rows];
     let sparse = !vertices.normal.is_empty();
-    // Column by column, as the vertices are stored (each row still left to
-    // right: a bridged vertex may be the left end of the next bridge).
-    for col in 0..cols {
-        for (row, bridged) in bridged_row.iter_mut().enumerate() {
+    // Row by row (each left to right: a bridged vertex may be the left end
+    // of the next bridge; rows share nothing), so that the source's ranges
+    // are read in their order and the vertices only at its dropouts.
+    for (row, bridged) in bridged_row.iter_mut().enumerate() {
+        for col in 0..cols {
             let cell = row * cols + col;
             let at = col * rows + row;
-            if vertices.at[at].is_some() || source.surfaces.range_m[cell].is_finite() {
+            if source.surfaces.range_m[cell].is_finite() || vertices.at[at].is_some() {
                 continue;
             }
             let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);

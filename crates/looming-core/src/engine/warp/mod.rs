@@ -194,14 +194,31 @@ impl Vertices {
     }
 }
 
-/// Whether the occupied cells of source column `col` share one time.
-fn column_shares_time(source: &Source, geometry: &ImageGeometry, col: usize) -> bool {
-    let mut times = (0..geometry.rows)
-        .map(|row| row * geometry.cols + col)
-        .filter(|&cell| source.surfaces.range_m[cell].is_finite())
-        .map(|cell| source.time_ns[cell]);
-    let first = times.next();
-    times.all(|time_ns| Some(time_ns) == first)
+/// Per source column, whether its occupied cells share one time: one pass
+/// over the rows (the image is row-major; walking it column by column
+/// strode across the whole image per cell).
+fn columns_sharing_time(source: &Source, geometry: &ImageGeometry) -> Vec<bool> {
+    let cols = geometry.cols.max(1);
+    let mut first: Vec<Option<StampNs>> = vec![None; cols];
+    let mut shares = vec![true; cols];
+    let rows = source
+        .surfaces
+        .range_m
+        .chunks(cols)
+        .zip(source.time_ns.chunks(cols));
+    for (ranges, times) in rows {
+        for (((range, &time_ns), first), shares) in
+            ranges.iter().zip(times).zip(&mut first).zip(&mut shares)
+        {
+            if range.is_finite() {
+                match *first {
+                    None => *first = Some(time_ns),
+                    Some(first_ns) => *shares &= first_ns == time_ns,
+                }
+            }
+        }
+    }
+    shares
 }
 
 /// What every source column's warp shares.
@@ -263,6 +280,7 @@ pub fn render(
             Vec::new()
         },
     };
+    let shares = columns_sharing_time(source, geometry);
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     // (A column whose returns do not share their time, KITTI's, takes its
@@ -276,7 +294,7 @@ pub fn render(
         scan_offset_ns,
     };
     let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
-        if column_shares_time(source, geometry, col) {
+        if shares[col] {
             columns.rows::<false>(col, column, normals);
         } else {
             columns.rows::<true>(col, column, normals);
