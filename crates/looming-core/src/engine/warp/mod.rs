@@ -173,13 +173,37 @@ struct Vertex {
     time_ns: StampNs,
 }
 
+impl Vertex {
+    /// No vertex (no return, or one across the seam of the sweep): a NaN
+    /// row, which no moved return has. (48 bytes a vertex where an
+    /// `Option` took 56: a render's vertices are read and written whole
+    /// several times, 7 MB at 64 x 2048.)
+    const NONE: Self = Self {
+        position: Point3::new(0.0, 0.0, 0.0),
+        row: f64::NAN,
+        col: f64::NAN,
+        time_ns: 0,
+    };
+
+    #[inline]
+    fn is_some(&self) -> bool {
+        !self.row.is_nan()
+    }
+
+    #[inline]
+    fn some(&self) -> Option<&Self> {
+        self.is_some().then_some(self)
+    }
+}
+
 /// The moved source vertices of one render, column-major (the vertex of
 /// source row `r`, column `c` at `c * rows + r`): each column is warped with
 /// one transform cache and written in place, and a quad's two rows are
 /// neighbours in memory.
 struct Vertices {
     rows: usize,
-    at: Vec<Option<Vertex>>,
+    /// [`Vertex::NONE`] where none.
+    at: Vec<Vertex>,
     /// The source surface's fitted normal of each vertex, in the target
     /// frame, column-major too: only on sparse sensors, whose rings are
     /// rendered with them (dense sensors' triangles have their own); empty
@@ -190,7 +214,7 @@ struct Vertices {
 impl Vertices {
     #[inline]
     fn get(&self, row: usize, col: usize) -> Option<&Vertex> {
-        self.at[col * self.rows + row].as_ref()
+        self.at[col * self.rows + row].some()
     }
 }
 
@@ -238,7 +262,7 @@ impl ColumnWarp<'_, '_> {
     fn rows<const LINES: bool>(
         &self,
         col: usize,
-        column: &mut [Option<Vertex>],
+        column: &mut [Vertex],
         normals: &mut [Vector3<f64>],
     ) {
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
@@ -253,7 +277,8 @@ impl ColumnWarp<'_, '_> {
                 (row, cell),
                 &mut cache,
                 normal,
-            );
+            )
+            .unwrap_or(Vertex::NONE);
         }
     }
 }
@@ -273,7 +298,7 @@ pub fn render(
     let rows = geometry.rows;
     let mut vertices = Vertices {
         rows,
-        at: vec![None; cells],
+        at: spare_vertices(cells),
         normal: if sparse {
             vec![Vector3::zeros(); cells]
         } else {
@@ -293,7 +318,7 @@ pub fn render(
         arrivals: &arrivals,
         scan_offset_ns,
     };
-    let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
+    let warp_column = |col: usize, column: &mut [Vertex], normals: &mut [Vector3<f64>]| {
         if shares[col] {
             columns.rows::<false>(col, column, normals);
         } else {
@@ -332,12 +357,27 @@ pub fn render(
             }
         }
     }
+    SPARE_VERTICES.with(|spare| spare.replace(vertices.at));
     Rendered {
         range_m,
         source_time_ns,
         normal,
         edge,
     }
+}
+
+thread_local! {
+    /// The last render's vertex buffer on this thread, reused.
+    static SPARE_VERTICES: std::cell::RefCell<Vec<Vertex>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A buffer of `cells` vertices, each to be overwritten by the warp (every
+/// column writes all its rows): the last render's where it has that many,
+/// so that 7 MB are neither allocated nor cleared per render.
+fn spare_vertices(cells: usize) -> Vec<Vertex> {
+    let mut at = SPARE_VERTICES.with(|spare| spare.take());
+    at.resize(cells, Vertex::NONE);
+    at
 }
 
 /// Every triangle (or, on a sparse sensor, ring segment) of the moved
