@@ -23,7 +23,7 @@ use crate::model::StampNs;
 
 use mesh::fill_dropouts;
 pub(super) use mesh::mesh_joins;
-use moved_vertices::{TransformCache, arrival_poses, warp_vertex};
+use moved_vertices::{SourceReturn, TransformCache, arrival_poses, warp_vertex};
 use raster::{rasterize_columns, rasterize_ring};
 
 /// One scan's surface, ready to be warped.
@@ -266,7 +266,9 @@ impl ColumnWarp<'_, '_> {
         normals: &mut [Vector3<f64>],
     ) {
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
-        for (row, vertex) in column.iter_mut().enumerate() {
+        let mut returns = Vec::with_capacity(column.len());
+        SourceReturn::column(self.source, self.geometry.cols, col, &mut returns);
+        for ((row, vertex), r) in column.iter_mut().enumerate().zip(&returns) {
             let cell = row * self.geometry.cols + col;
             let normal = normals.get_mut(row);
             *vertex = warp_vertex(
@@ -274,7 +276,7 @@ impl ColumnWarp<'_, '_> {
                 self.target,
                 self.geometry,
                 self.scan_offset_ns,
-                (row, cell),
+                (row, cell, r),
                 &mut cache,
                 normal,
             )
