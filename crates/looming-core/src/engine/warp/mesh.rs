@@ -25,30 +25,32 @@ pub(super) fn fill_dropouts(
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
     let mut bridged_row = vec![false; rows];
     let sparse = !vertices.normal.is_empty();
-    // Column by column, as the vertices are stored (each row still left to
-    // right: a bridged vertex may be the left end of the next bridge).
-    for col in 0..cols {
-        for (row, bridged) in bridged_row.iter_mut().enumerate() {
+    // Row by row (each left to right: a bridged vertex may be the left end
+    // of the next bridge; rows share nothing), so that the source's ranges
+    // are read in their order and the vertices only at its dropouts.
+    for (row, bridged) in bridged_row.iter_mut().enumerate() {
+        for col in 0..cols {
             let cell = row * cols + col;
             let at = col * rows + row;
-            if vertices.at[at].is_some() || source.surfaces.range_m[cell].is_finite() {
+            if source.surfaces.range_m[cell].is_finite() || vertices.at[at].is_some() {
                 continue;
             }
             let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
             let (left, right) = (row * cols + left_col, row * cols + right_col);
             let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
-            let (Some(a), Some(b)) = (vertices.at[left_at], vertices.at[right_at]) else {
+            let (Some(a), Some(b)) = (vertices.at[left_at].some(), vertices.at[right_at].some())
+            else {
                 continue;
             };
             if !same_surface(source.surfaces, left, right) || (a.col - b.col).abs() > 3.0 {
                 continue;
             }
-            vertices.at[at] = Some(Vertex {
+            vertices.at[at] = Vertex {
                 position: Point3::from((a.position.coords + b.position.coords) * 0.5),
                 row: 0.5 * (a.row + b.row),
                 col: 0.5 * (a.col + b.col),
                 time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
-            });
+            };
             if sparse {
                 vertices.normal[at] = (vertices.normal[left_at] + vertices.normal[right_at]) * 0.5;
             }

@@ -23,7 +23,7 @@ use crate::model::StampNs;
 
 use mesh::fill_dropouts;
 pub(super) use mesh::mesh_joins;
-use moved_vertices::{TransformCache, arrival_poses, warp_vertex};
+use moved_vertices::{SourceReturn, TransformCache, arrival_poses, warp_vertex};
 use raster::{rasterize_columns, rasterize_ring};
 
 /// One scan's surface, ready to be warped.
@@ -173,13 +173,37 @@ struct Vertex {
     time_ns: StampNs,
 }
 
+impl Vertex {
+    /// No vertex (no return, or one across the seam of the sweep): a NaN
+    /// row, which no moved return has. (48 bytes a vertex where an
+    /// `Option` took 56: a render's vertices are read and written whole
+    /// several times, 7 MB at 64 x 2048.)
+    const NONE: Self = Self {
+        position: Point3::new(0.0, 0.0, 0.0),
+        row: f64::NAN,
+        col: f64::NAN,
+        time_ns: 0,
+    };
+
+    #[inline]
+    fn is_some(&self) -> bool {
+        !self.row.is_nan()
+    }
+
+    #[inline]
+    fn some(&self) -> Option<&Self> {
+        self.is_some().then_some(self)
+    }
+}
+
 /// The moved source vertices of one render, column-major (the vertex of
 /// source row `r`, column `c` at `c * rows + r`): each column is warped with
 /// one transform cache and written in place, and a quad's two rows are
 /// neighbours in memory.
 struct Vertices {
     rows: usize,
-    at: Vec<Option<Vertex>>,
+    /// [`Vertex::NONE`] where none.
+    at: Vec<Vertex>,
     /// The source surface's fitted normal of each vertex, in the target
     /// frame, column-major too: only on sparse sensors, whose rings are
     /// rendered with them (dense sensors' triangles have their own); empty
@@ -190,18 +214,35 @@ struct Vertices {
 impl Vertices {
     #[inline]
     fn get(&self, row: usize, col: usize) -> Option<&Vertex> {
-        self.at[col * self.rows + row].as_ref()
+        self.at[col * self.rows + row].some()
     }
 }
 
-/// Whether the occupied cells of source column `col` share one time.
-fn column_shares_time(source: &Source, geometry: &ImageGeometry, col: usize) -> bool {
-    let mut times = (0..geometry.rows)
-        .map(|row| row * geometry.cols + col)
-        .filter(|&cell| source.surfaces.range_m[cell].is_finite())
-        .map(|cell| source.time_ns[cell]);
-    let first = times.next();
-    times.all(|time_ns| Some(time_ns) == first)
+/// Per source column, whether its occupied cells share one time: one pass
+/// over the rows (the image is row-major; walking it column by column
+/// strode across the whole image per cell).
+fn columns_sharing_time(source: &Source, geometry: &ImageGeometry) -> Vec<bool> {
+    let cols = geometry.cols.max(1);
+    let mut first: Vec<Option<StampNs>> = vec![None; cols];
+    let mut shares = vec![true; cols];
+    let rows = source
+        .surfaces
+        .range_m
+        .chunks(cols)
+        .zip(source.time_ns.chunks(cols));
+    for (ranges, times) in rows {
+        for (((range, &time_ns), first), shares) in
+            ranges.iter().zip(times).zip(&mut first).zip(&mut shares)
+        {
+            if range.is_finite() {
+                match *first {
+                    None => *first = Some(time_ns),
+                    Some(first_ns) => *shares &= first_ns == time_ns,
+                }
+            }
+        }
+    }
+    shares
 }
 
 /// What every source column's warp shares.
@@ -221,11 +262,13 @@ impl ColumnWarp<'_, '_> {
     fn rows<const LINES: bool>(
         &self,
         col: usize,
-        column: &mut [Option<Vertex>],
+        column: &mut [Vertex],
         normals: &mut [Vector3<f64>],
     ) {
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
-        for (row, vertex) in column.iter_mut().enumerate() {
+        let mut returns = Vec::with_capacity(column.len());
+        SourceReturn::column(self.source, self.geometry.cols, col, &mut returns);
+        for ((row, vertex), r) in column.iter_mut().enumerate().zip(&returns) {
             let cell = row * self.geometry.cols + col;
             let normal = normals.get_mut(row);
             *vertex = warp_vertex(
@@ -233,10 +276,11 @@ impl ColumnWarp<'_, '_> {
                 self.target,
                 self.geometry,
                 self.scan_offset_ns,
-                (row, cell),
+                (row, cell, r),
                 &mut cache,
                 normal,
-            );
+            )
+            .unwrap_or(Vertex::NONE);
         }
     }
 }
@@ -256,13 +300,14 @@ pub fn render(
     let rows = geometry.rows;
     let mut vertices = Vertices {
         rows,
-        at: vec![None; cells],
+        at: spare_vertices(cells),
         normal: if sparse {
             vec![Vector3::zeros(); cells]
         } else {
             Vec::new()
         },
     };
+    let shares = columns_sharing_time(source, geometry);
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     // (A column whose returns do not share their time, KITTI's, takes its
@@ -275,8 +320,8 @@ pub fn render(
         arrivals: &arrivals,
         scan_offset_ns,
     };
-    let warp_column = |col: usize, column: &mut [Option<Vertex>], normals: &mut [Vector3<f64>]| {
-        if column_shares_time(source, geometry, col) {
+    let warp_column = |col: usize, column: &mut [Vertex], normals: &mut [Vector3<f64>]| {
+        if shares[col] {
             columns.rows::<false>(col, column, normals);
         } else {
             columns.rows::<true>(col, column, normals);
@@ -314,12 +359,27 @@ pub fn render(
             }
         }
     }
+    SPARE_VERTICES.with(|spare| spare.replace(vertices.at));
     Rendered {
         range_m,
         source_time_ns,
         normal,
         edge,
     }
+}
+
+thread_local! {
+    /// The last render's vertex buffer on this thread, reused.
+    static SPARE_VERTICES: std::cell::RefCell<Vec<Vertex>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A buffer of `cells` vertices, each to be overwritten by the warp (every
+/// column writes all its rows): the last render's where it has that many,
+/// so that 7 MB are neither allocated nor cleared per render.
+fn spare_vertices(cells: usize) -> Vec<Vertex> {
+    let mut at = SPARE_VERTICES.with(|spare| spare.take());
+    at.resize(cells, Vertex::NONE);
+    at
 }
 
 /// Every triangle (or, on a sparse sensor, ring segment) of the moved

@@ -245,25 +245,24 @@ pub(super) fn warp_vertex<const LINES: bool>(
     target: &Target,
     geometry: &ImageGeometry,
     scan_offset_ns: StampNs,
-    (row, cell): (usize, usize),
+    (row, cell, r): (usize, usize, &SourceReturn),
     cache: &mut TransformCache<LINES>,
     normal: Option<&mut Vector3<f64>>,
 ) -> Option<Vertex> {
-    let range = f64::from(source.surfaces.range_m[cell]);
+    let range = f64::from(r.range_m);
     if !range.is_finite() {
         return None;
     }
-    let d = source.surfaces.direction[cell];
+    let d = r.direction;
     let point = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * range;
-    let measured_ns = source.time_ns[cell];
+    let measured_ns = r.time_ns;
     // It will be seen again about one scan later; refine with the firing time
     // of the column it lands in (a rolling sweep fires columns at different times).
     let seen_ns = measured_ns + scan_offset_ns;
     let mut transform = cache.until(measured_ns, seen_ns);
     let mut moved = transform.apply(&point);
     // The moved return's angles: the source return's, turned by the motion.
-    let mut azimuth =
-        source.surfaces.azimuth_rad[cell] + turn_rad((point.x, point.y), (moved.x, moved.y));
+    let mut azimuth = r.azimuth_rad + turn_rad((point.x, point.y), (moved.x, moved.y));
     let col = geometry.col_of(azimuth);
     let column_ns = target.column_time_ns[col];
     if column_ns != StampNs::MIN && column_ns != seen_ns {
@@ -287,7 +286,7 @@ pub(super) fn warp_vertex<const LINES: bool>(
     }
     let level_squared = moved.x * moved.x + moved.y * moved.y;
     let level = level_squared.sqrt();
-    let elevation = source.surfaces.elevation_rad[cell]
+    let elevation = r.elevation_rad
         + turn_rad(
             ((point.x * point.x + point.y * point.y).sqrt(), point.z),
             (level, moved.z),
@@ -298,6 +297,40 @@ pub(super) fn warp_vertex<const LINES: bool>(
         col: geometry.col_f(azimuth),
         time_ns: measured_ns,
     })
+}
+
+/// What the warp reads of one source return, gathered column by column
+/// ([`SourceReturn::column`]): the source's arrays are row-major, and a
+/// column's returns lie a whole image row apart in each of five of them
+/// (8-24 KiB strides, which share a handful of cache sets), so each
+/// return's warp began with misses; gathered first, a column's loads are
+/// all issued at once.
+#[derive(Clone, Copy)]
+pub(super) struct SourceReturn {
+    range_m: f32,
+    direction: [f32; 3],
+    time_ns: StampNs,
+    azimuth_rad: f64,
+    elevation_rad: f64,
+}
+
+impl SourceReturn {
+    /// The returns of source column `col`, top to bottom, into `column`.
+    pub(super) fn column(source: &Source, cols: usize, col: usize, column: &mut Vec<Self>) {
+        let s = source.surfaces;
+        column.clear();
+        column.extend(
+            (col..s.range_m.len())
+                .step_by(cols.max(1))
+                .map(|cell| Self {
+                    range_m: s.range_m[cell],
+                    direction: s.direction[cell],
+                    time_ns: source.time_ns[cell],
+                    azimuth_rad: s.azimuth_rad[cell],
+                    elevation_rad: s.elevation_rad[cell],
+                }),
+        );
+    }
 }
 
 /// [`turn_rad`] for a turn of a few milliradians (a column's time
