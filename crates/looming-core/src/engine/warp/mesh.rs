@@ -91,23 +91,35 @@ pub(in crate::engine) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usiz
                 .get(row + 1)
                 .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
             let finite = |cell: usize| surfaces.range_m[cell].is_finite();
+            // Each cell's point and normal once per edge it ends, not once
+            // per call (the right neighbour's is the next column's own).
+            let mut at_right = CellPlane::of(surfaces, row * cols);
             for (col, joins) in joins_of_row.iter_mut().enumerate() {
                 let cell = row * cols + col;
                 let right = row * cols + if col + 1 == cols { 0 } else { col + 1 };
+                let at_here = at_right;
+                at_right = CellPlane::of(surfaces, right);
                 let here = finite(cell);
-                if here && finite(right) && on_one_plane(surfaces, cell, right, noise_here) {
+                if here
+                    && finite(right)
+                    && planes_on_one(surfaces, (cell, &at_here), (right, &at_right), noise_here)
+                {
                     *joins |= JOIN_RIGHT;
                 }
                 if row + 1 < rows {
                     let down = cell + cols;
-                    if here && finite(down) && on_one_plane(surfaces, cell, down, noise_down) {
+                    let at_down = CellPlane::of(surfaces, down);
+                    if here
+                        && finite(down)
+                        && planes_on_one(surfaces, (cell, &at_here), (down, &at_down), noise_down)
+                    {
                         *joins |= JOIN_DOWN;
                     }
                     // The diagonal does not involve this cell: an empty cell's
                     // neighbours still share the quad's other triangle.
                     if finite(right)
                         && finite(down)
-                        && on_one_plane(surfaces, right, down, noise_down)
+                        && planes_on_one(surfaces, (right, &at_right), (down, &at_down), noise_down)
                     {
                         *joins |= JOIN_ANTI;
                     }
@@ -204,22 +216,51 @@ fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
 /// [`same_surface`] with the larger of the two cells' range noise given
 /// (metres): the mesh's table takes it per row, not per cell.
 fn on_one_plane(s: &Surfaces, a: usize, b: usize, noise_m: f64) -> bool {
-    let point = |c: usize| {
-        let d = s.direction[c];
-        Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * f64::from(s.range_m[c])
-    };
-    let (pa, pb) = (point(a), point(b));
-    let gap = pb - pa;
-    let tolerance = 4.0 * noise_m + 0.05 * gap.norm();
-    let off_plane = |c: usize, other: &Vector3<f64>| {
-        let n = s.normal[c];
+    let (at_a, at_b) = (CellPlane::of(s, a), CellPlane::of(s, b));
+    planes_on_one(s, (a, &at_a), (b, &at_b), noise_m)
+}
+
+/// A cell's return and surface normal in `f64` ([`on_one_plane`]'s terms).
+#[derive(Clone, Copy)]
+struct CellPlane {
+    point: Vector3<f64>,
+    /// The normal, where the cell has one.
+    normal: Option<Vector3<f64>>,
+}
+
+impl CellPlane {
+    #[inline]
+    fn of(s: &Surfaces, cell: usize) -> Self {
+        let d = s.direction[cell];
+        let n = s.normal[cell];
         let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
-        (n.norm_squared() > 0.5).then(|| other.dot(&n).abs())
-    };
-    match (off_plane(a, &gap), off_plane(b, &gap)) {
+        Self {
+            point: Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]))
+                * f64::from(s.range_m[cell]),
+            normal: (n.norm_squared() > 0.5).then_some(n),
+        }
+    }
+}
+
+/// [`on_one_plane`] of cells `a` and `b` with their [`CellPlane`]s.
+#[inline]
+fn planes_on_one(
+    s: &Surfaces,
+    (a, at_a): (usize, &CellPlane),
+    (b, at_b): (usize, &CellPlane),
+    noise_m: f64,
+) -> bool {
+    let gap = at_b.point - at_a.point;
+    let off_plane = |at: &CellPlane| at.normal.map(|n| gap.dot(&n).abs());
+    match (off_plane(at_a), off_plane(at_b)) {
         // Each vertex must lie on the other's plane: a triangle across a crease
-        // (road meeting a wall) is a chamfer that is not there.
-        (Some(da), Some(db)) => da.max(db) <= tolerance,
+        // (road meeting a wall) is a chamfer that is not there. The tolerance
+        // is at least its noise term (the rounded sum of it and a term >= 0),
+        // so most joins need no square root for the gap's term.
+        (Some(da), Some(db)) => {
+            let (off, noise_term) = (da.max(db), 4.0 * noise_m);
+            off <= noise_term || off <= noise_term + 0.05 * gap.norm()
+        }
         // No plane: fall back to a range-ratio test.
         _ => {
             let (ra, rb) = (f64::from(s.range_m[a]), f64::from(s.range_m[b]));
