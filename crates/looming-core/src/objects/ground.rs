@@ -112,9 +112,9 @@ fn height_above([a, b, c]: [f64; 3], p: &[f64; 3]) -> f64 {
 
 /// The return of every range-image cell (its nearest, as [`cell_point`]
 /// gives it), gathered once per pair on both cores: the ground and the
-/// segmentation read every cell's, and a gather from the scan's points in
-/// cell order waits on a cache miss per cell (a third of the objects'
-/// stage, serial, read twice).
+/// segmentation read every cell's, and gathered from the scan's points in
+/// cell order each read waited on a cache miss (a fifth of the objects'
+/// stage's samples, serial, twice per pair).
 pub struct CellPoints {
     /// The scan's `f32` coordinates (exactly what `cell_point` widens).
     points_m: Vec<Option<[f32; 3]>>,

@@ -268,6 +268,8 @@ impl ColumnWarp<'_, '_> {
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
         let mut returns = Vec::with_capacity(column.len());
         SourceReturn::column(self.source, self.geometry.cols, col, &mut returns);
+        // Every vertex is written: the buffer is reused from the last render.
+        debug_assert_eq!(returns.len(), column.len());
         for ((row, vertex), r) in column.iter_mut().enumerate().zip(&returns) {
             let cell = row * self.geometry.cols + col;
             let normal = normals.get_mut(row);
