@@ -81,7 +81,7 @@ impl Surfaces {
 /// again by the next row's windows after leaving the cache).
 const MAX_BAND_ROWS: usize = 8;
 const BANDS: usize = 8;
-const TILE_COLS: usize = 64;
+pub(super) const TILE_COLS: usize = 64;
 
 /// Columns a scan needs for [`Surfaces::write_fits`] to start each cell's
 /// growth at its left neighbour's. Once a wide window is needed (a close

@@ -294,7 +294,7 @@ fn bands_and_tiles_fit_as_cell_by_cell(cols: usize) {
             range_noise_m: f64::from(noise_m_per_row[cell / cols]),
             ..params
         };
-        if (cell % cols).is_multiple_of(64) {
+        if (cell % cols).is_multiple_of(fits::TILE_COLS) {
             left_grow = 1;
         }
         let (want, grow) =

@@ -258,19 +258,19 @@ struct ColumnWarp<'r, 's> {
 impl ColumnWarp<'_, '_> {
     /// The returns of source column `col` moved into the target
     /// ([`warp_vertex`]), into `column` (and their normals into `normals`
-    /// where asked), with one transform cache.
+    /// where asked), with one transform cache; `returns`: the worker's
+    /// buffer for the column's gathered returns (no allocation per column).
     fn rows<const LINES: bool>(
         &self,
         col: usize,
-        column: &mut [Vertex],
-        normals: &mut [Vector3<f64>],
+        (column, normals): (&mut [Vertex], &mut [Vector3<f64>]),
+        returns: &mut Vec<SourceReturn>,
     ) {
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
-        let mut returns = Vec::with_capacity(column.len());
-        SourceReturn::column(self.source, self.geometry.cols, col, &mut returns);
+        SourceReturn::column(self.source, self.geometry.cols, col, returns);
         // Every vertex is written: the buffer is reused from the last render.
         debug_assert_eq!(returns.len(), column.len());
-        for ((row, vertex), r) in column.iter_mut().enumerate().zip(&returns) {
+        for ((row, vertex), r) in column.iter_mut().enumerate().zip(returns.iter()) {
             let cell = row * self.geometry.cols + col;
             let normal = normals.get_mut(row);
             *vertex = warp_vertex(
@@ -322,11 +322,14 @@ pub fn render(
         arrivals: &arrivals,
         scan_offset_ns,
     };
-    let warp_column = |col: usize, column: &mut [Vertex], normals: &mut [Vector3<f64>]| {
+    let warp_column = |returns: &mut Vec<SourceReturn>,
+                       col: usize,
+                       column: &mut [Vertex],
+                       normals: &mut [Vector3<f64>]| {
         if shares[col] {
-            columns.rows::<false>(col, column, normals);
+            columns.rows::<false>(col, (column, normals), returns);
         } else {
-            columns.rows::<true>(col, column, normals);
+            columns.rows::<true>(col, (column, normals), returns);
         }
     };
     let chunk = rows.max(1);
@@ -336,13 +339,17 @@ pub fn render(
             .par_chunks_mut(chunk)
             .zip(vertices.normal.par_chunks_mut(chunk))
             .enumerate()
-            .for_each(|(col, (column, normals))| warp_column(col, column, normals));
+            .for_each_init(Vec::new, |returns, (col, (column, normals))| {
+                warp_column(returns, col, column, normals)
+            });
     } else {
         vertices
             .at
             .par_chunks_mut(chunk)
             .enumerate()
-            .for_each(|(col, column)| warp_column(col, column, &mut []));
+            .for_each_init(Vec::new, |returns, (col, column)| {
+                warp_column(returns, col, column, &mut [])
+            });
     }
     let proxy = fill_dropouts(source, geometry, &mut vertices);
     let candidates = rasterize(source, target, geometry, &vertices, &proxy);
