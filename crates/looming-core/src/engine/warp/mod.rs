@@ -6,9 +6,10 @@
 //!
 //! Here the render and its z-buffer; the vertices moved in
 //! `moved_vertices.rs`, the mesh's joins and bridged dropouts in `mesh.rs`,
-//! the rasterisation in `raster.rs`.
+//! the rasterisation in `raster.rs` (its common case in `full_quad.rs`).
 
 mod flat_triangle;
+mod full_quad;
 mod mesh;
 mod moved_vertices;
 mod raster;
@@ -58,6 +59,34 @@ pub struct Target<'a> {
 pub(super) struct Bands {
     pub rows: Vec<Reach>,
     pub cols: Vec<Reach>,
+    /// The same as the coordinates the rays reach ([`Span`]), which the
+    /// rasteriser compares with each quad's box (four per quad: the
+    /// conversions and sums taken once per target, not per quad).
+    pub row_spans: Vec<Span>,
+    pub col_spans: Vec<Span>,
+}
+
+/// The lowest and highest coordinates (rows or columns) the rays of row
+/// or column `i` reach, widened by [`REACH_SLACK`]: `i - before - slack`
+/// and `i + after + slack`, in that order of operations (`+inf` and
+/// `-inf` where it has none).
+#[derive(Clone, Copy)]
+pub(super) struct Span {
+    pub lowest: f64,
+    pub highest: f64,
+}
+
+impl Span {
+    fn all(reaches: &[Reach]) -> Vec<Self> {
+        reaches
+            .iter()
+            .enumerate()
+            .map(|(i, r)| Self {
+                lowest: i as f64 - r.before - REACH_SLACK,
+                highest: i as f64 + r.after + REACH_SLACK,
+            })
+            .collect()
+    }
 }
 
 /// The furthest offsets of a row's or column's rays from it, in cells:
@@ -90,6 +119,8 @@ impl Bands {
         let mut bands = Self {
             rows: vec![Reach::NONE; rows],
             cols: vec![Reach::NONE; cols],
+            row_spans: Vec::new(),
+            col_spans: Vec::new(),
         };
         for (cell, &(row_f, col_f)) in coords.iter().enumerate() {
             if !surfaces.range_m[cell].is_finite() {
@@ -100,6 +131,8 @@ impl Bands {
             bands.rows[row] = bands.rows[row].with(row_off);
             bands.cols[col] = bands.cols[col].with(col_offset(col_f, col, cols));
         }
+        bands.row_spans = Span::all(&bands.rows);
+        bands.col_spans = Span::all(&bands.cols);
         bands
     }
 

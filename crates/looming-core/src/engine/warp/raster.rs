@@ -6,11 +6,12 @@
 use nalgebra::Vector3;
 
 use super::flat_triangle::{FlatTriangle, SharedDiagonal};
+use super::full_quad::rasterize_full_quad;
 use super::mesh::{
     EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
     on_one_surface,
 };
-use super::{Candidate, REACH_SLACK, Reach, Source, Target, Vertex, Vertices};
+use super::{Candidate, REACH_SLACK, Source, Span, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
 use crate::model::StampNs;
 
@@ -70,6 +71,14 @@ fn rasterize_quad_at(
         return;
     }
     let next = if col + 1 == cols { 0 } else { col + 1 };
+    if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == QUAD_FIRST | QUAD_SECOND {
+        let (at, rows) = (&vertices.at, vertices.rows);
+        let (left, right) = (col * rows + row, next * rows + row);
+        let quad = [&at[left], &at[right], &at[left + 1], &at[right + 1]];
+        if rasterize_full_quad(target, geometry, quad, joins[a], out) {
+            return;
+        }
+    }
     // Either triangle needs the diagonal's two vertices.
     let (Some(vb), Some(vc)) = (vertices.get(row, next), vertices.get(row + 1, col)) else {
         return;
@@ -307,10 +316,10 @@ fn rasterize_quad<'v>(
     let mut planes = [None, None];
     let ((row_lo, row_hi), (col_lo, col_hi)) =
         box_in_reach(target, geometry, (r_min, r_max), (c_min, c_max));
-    let (col_lo, col_hi) = (col_lo as usize, col_hi as usize);
+    let (col_lo, col_hi) = (index_of(col_lo), index_of(col_hi));
     let bands = &target.bands;
-    let (row_lo, row_hi) = within_bands(&bands.rows, (row_lo, row_hi), (r_min, r_max));
-    let (col_lo, col_hi) = within_bands(&bands.cols, (col_lo, col_hi), (c_min, c_max));
+    let (row_lo, row_hi) = within_bands(&bands.row_spans, (row_lo, row_hi), (r_min, r_max));
+    let (col_lo, col_hi) = within_bands(&bands.col_spans, (col_lo, col_hi), (c_min, c_max));
     let shared = first
         .as_ref()
         .zip(second.as_ref())
@@ -349,15 +358,15 @@ fn rasterize_quad<'v>(
 /// hold rays in the box, or, rarely, ones the weights reject.) `lo > hi`
 /// where none is left.
 #[inline]
-fn within_bands(
-    bands: &[Reach],
+pub(super) fn within_bands(
+    spans: &[Span],
     (mut lo, mut hi): (usize, usize),
     (min, max): (f64, f64),
 ) -> (usize, usize) {
-    while lo <= hi && lo as f64 + bands[lo].after + REACH_SLACK < min {
+    while lo <= hi && spans[lo].highest < min {
         lo += 1;
     }
-    while hi > lo && hi as f64 - bands[hi].before - REACH_SLACK > max {
+    while hi > lo && spans[hi].lowest > max {
         hi -= 1;
     }
     (lo, hi)
@@ -368,7 +377,7 @@ fn within_bands(
 /// plane (computed once a ray falls inside: about half the triangles hold
 /// none, a quad's two share its one or two rays).
 #[inline]
-fn hit(
+pub(super) fn hit(
     target: &Target,
     cell: usize,
     v: [&Vertex; 3],
@@ -491,22 +500,31 @@ fn cells_in_reach(
 /// target's reach (about half a cell, where the whole cells around the box
 /// hold some three times as many).
 #[inline]
-fn box_in_reach(
+pub(super) fn box_in_reach(
     target: &Target,
     geometry: &ImageGeometry,
     (r_min, r_max): (f64, f64),
     (c_min, c_max): (f64, f64),
 ) -> ((usize, usize), (f64, f64)) {
     let (row_reach, col_reach) = (target.reach.0 + REACH_SLACK, target.reach.1 + REACH_SLACK);
-    let row_lo = most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0) as usize;
-    let row_hi = (least(r_max.ceil(), (r_max + row_reach).floor()) as usize).min(geometry.rows - 1);
+    let row_lo = index_of(most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0));
+    let row_hi = index_of(least(r_max.ceil(), (r_max + row_reach).floor())).min(geometry.rows - 1);
     let col_lo = most(c_min.floor(), (c_min - col_reach).ceil());
     let col_hi = least(c_max.ceil(), (c_max + col_reach).floor());
     ((row_lo, row_hi), (col_lo, col_hi))
 }
 
+/// A whole coordinate as an index, as `x as usize` takes it for every
+/// `x` below 2^63 (negative and NaN to 0), and `i64::MAX` above (which no
+/// index reaches either): half the instructions of the unsigned
+/// conversion, four per quad.
+#[inline(always)]
+pub(super) fn index_of(x: f64) -> usize {
+    (x as i64).max(0) as usize
+}
+
 /// The plane through a triangle's vertices.
-struct TrianglePlane {
+pub(super) struct TrianglePlane {
     /// `(b - a) x (c - a)`, unnormalised, and its length.
     normal: Vector3<f64>,
     normal_norm: f64,
@@ -629,7 +647,7 @@ mod tests {
         assert!(target.reach.0 > 0.9 && target.reach.1 > 0.9);
         // Some rows' bands are narrow: the cut has something to drop.
         assert!(target.bands.rows.iter().any(|r| r.after < 0.5));
-        let cut = within_bands(&target.bands.cols, (9, 12), (10.4, 10.6));
+        let cut = within_bands(&target.bands.col_spans, (9, 12), (10.4, 10.6));
         assert!(cut.1 - cut.0 < 3, "{cut:?}");
         quads_give_each_triangles_candidates(&geometry, &surfaces, &coords);
     }
@@ -651,7 +669,7 @@ mod tests {
                 .wrapping_add(1);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        let (mut quads, mut candidates) = (0, 0);
+        let (mut quads, mut candidates, mut whole_quads) = (0, 0, 0);
         for _ in 0..4000 {
             // A quad around a random spot, sheared and moved by up to a
             // cell, on the seam now and then; sometimes a thin or
@@ -687,6 +705,24 @@ mod tests {
                 continue;
             }
             quads += 1;
+            // The whole quad's path, where it takes the quad: the same
+            // candidates in the same order, bit for bit.
+            if let [Some((_, first_edge)), Some((_, second_edge))] = triangles {
+                let bits = if first_edge { EDGE_FIRST } else { 0 }
+                    | if second_edge { EDGE_SECOND } else { 0 };
+                let mut whole = Vec::new();
+                if rasterize_full_quad(
+                    &target,
+                    &geometry,
+                    [&v[0], &v[1], &v[2], &v[3]],
+                    bits,
+                    &mut whole,
+                ) {
+                    whole_quads += 1;
+                    let keys = |c: &[Candidate]| c.iter().map(key).collect::<Vec<_>>();
+                    assert_eq!(keys(&whole), keys(&got));
+                }
+            }
             candidates += expected.len();
             // The z-buffer sees each cell's candidates in turn: the same
             // per cell, in the same order.
@@ -699,8 +735,8 @@ mod tests {
             assert_eq!(got, expected);
         }
         assert!(
-            quads > 3000 && candidates > 1500,
-            "{quads} quads, {candidates} candidates"
+            quads > 3000 && candidates > 1500 && whole_quads > 1500,
+            "{quads} quads ({whole_quads} whole), {candidates} candidates"
         );
     }
 }
