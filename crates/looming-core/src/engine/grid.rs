@@ -92,14 +92,7 @@ impl ImageGeometry {
             Some(parallax) => beams[k] + parallax[k] * inverse_range,
             None => beams[k],
         };
-        let below = walk_to_partition(n, &at, elevation_rad, near_row);
-        let k = below.clamp(1, n - 1) - 1;
-        let span = at(k + 1) - at(k);
-        if span > 0.0 {
-            k as f64 + (elevation_rad - at(k)) / span
-        } else {
-            k as f64
-        }
+        between_beams(n, at, elevation_rad, near_row)
     }
 
     pub fn cells(&self) -> usize {
@@ -166,6 +159,25 @@ impl ImageGeometry {
                 Some(r as usize * self.cols + wrap_col(col + dc, self.cols as i64))
             })
         })
+    }
+}
+
+/// The continuous row of `elevation_rad` between the `n >= 2` beams'
+/// elevations `at(k)` (in order), searched from `near_row`.
+#[inline]
+pub(crate) fn between_beams(
+    n: usize,
+    at: impl Fn(usize) -> f64,
+    elevation_rad: f64,
+    near_row: usize,
+) -> f64 {
+    let below = walk_to_partition(n, &at, elevation_rad, near_row);
+    let k = below.clamp(1, n - 1) - 1;
+    let span = at(k + 1) - at(k);
+    if span > 0.0 {
+        k as f64 + (elevation_rad - at(k)) / span
+    } else {
+        k as f64
     }
 }
 

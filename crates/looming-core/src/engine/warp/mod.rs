@@ -11,6 +11,7 @@
 mod flat_triangle;
 mod full_quad;
 mod mesh;
+mod moved_column;
 mod moved_vertices;
 mod raster;
 
@@ -24,7 +25,8 @@ use crate::model::StampNs;
 
 use mesh::fill_dropouts;
 pub(super) use mesh::mesh_joins;
-use moved_vertices::{SourceReturn, TransformCache, arrival_poses, warp_vertex};
+use moved_column::{ColumnRows, ColumnWarp};
+use moved_vertices::arrival_poses;
 use raster::{rasterize_columns, rasterize_ring};
 
 /// One scan's surface, ready to be warped.
@@ -278,48 +280,6 @@ fn columns_sharing_time(source: &Source, geometry: &ImageGeometry) -> Vec<bool> 
     shares
 }
 
-/// What every source column's warp shares.
-struct ColumnWarp<'r, 's> {
-    source: &'r Source<'s>,
-    target: &'r Target<'s>,
-    geometry: &'r ImageGeometry,
-    trajectory: &'r Trajectory,
-    arrivals: &'r [nalgebra::Isometry3<f64>],
-    scan_offset_ns: StampNs,
-}
-
-impl ColumnWarp<'_, '_> {
-    /// The returns of source column `col` moved into the target
-    /// ([`warp_vertex`]), into `column` (and their normals into `normals`
-    /// where asked), with one transform cache; `returns`: the worker's
-    /// buffer for the column's gathered returns (no allocation per column).
-    fn rows<const LINES: bool>(
-        &self,
-        col: usize,
-        (column, normals): (&mut [Vertex], &mut [Vector3<f64>]),
-        returns: &mut Vec<SourceReturn>,
-    ) {
-        let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
-        SourceReturn::column(self.source, self.geometry.cols, col, returns);
-        // Every vertex is written: the buffer is reused from the last render.
-        debug_assert_eq!(returns.len(), column.len());
-        for ((row, vertex), r) in column.iter_mut().enumerate().zip(returns.iter()) {
-            let cell = row * self.geometry.cols + col;
-            let normal = normals.get_mut(row);
-            *vertex = warp_vertex(
-                self.source,
-                self.target,
-                self.geometry,
-                self.scan_offset_ns,
-                (row, cell, r),
-                &mut cache,
-                normal,
-            )
-            .unwrap_or(Vertex::NONE);
-        }
-    }
-}
-
 pub fn render(
     source: &Source,
     target: &Target,
@@ -355,7 +315,7 @@ pub fn render(
         arrivals: &arrivals,
         scan_offset_ns,
     };
-    let warp_column = |returns: &mut Vec<SourceReturn>,
+    let warp_column = |returns: &mut ColumnRows,
                        col: usize,
                        column: &mut [Vertex],
                        normals: &mut [Vector3<f64>]| {
@@ -372,7 +332,7 @@ pub fn render(
             .par_chunks_mut(chunk)
             .zip(vertices.normal.par_chunks_mut(chunk))
             .enumerate()
-            .for_each_init(Vec::new, |returns, (col, (column, normals))| {
+            .for_each_init(ColumnRows::default, |returns, (col, (column, normals))| {
                 warp_column(returns, col, column, normals)
             });
     } else {
@@ -380,7 +340,7 @@ pub fn render(
             .at
             .par_chunks_mut(chunk)
             .enumerate()
-            .for_each_init(Vec::new, |returns, (col, column)| {
+            .for_each_init(ColumnRows::default, |returns, (col, column)| {
                 warp_column(returns, col, column, &mut [])
             });
     }

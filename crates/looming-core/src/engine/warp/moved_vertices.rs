@@ -7,8 +7,6 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
 
-use super::{Source, Target, Vertex};
-use crate::engine::grid::ImageGeometry;
 use crate::engine::trajectory::Trajectory;
 use crate::model::StampNs;
 
@@ -52,8 +50,14 @@ impl Moving {
     }
 
     #[inline]
-    fn apply(&self, point: &Point3<f64>) -> Point3<f64> {
+    pub(super) fn apply(&self, point: &Point3<f64>) -> Point3<f64> {
         Point3::from(self.rotation * point.coords + self.translation)
+    }
+
+    /// A direction (a normal) turned by the rotation.
+    #[inline]
+    pub(super) fn rotate(&self, direction: &Vector3<f64>) -> Vector3<f64> {
+        self.rotation * direction
     }
 }
 
@@ -106,7 +110,7 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
     }
 
     /// Points measured at `from_ns` into the frame at `to_ns`.
-    fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Moving {
+    pub(super) fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Moving {
         if let Some((key, transform)) = self.to_time
             && key == (from_ns, to_ns)
         {
@@ -140,7 +144,7 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
 
     /// Points measured at `from_ns` into the frame target column `col`
     /// fired in.
-    fn until_column(&mut self, from_ns: StampNs, col: usize) -> Moving {
+    pub(super) fn until_column(&mut self, from_ns: StampNs, col: usize) -> Moving {
         let key = (from_ns, col);
         if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
             return *transform;
@@ -236,116 +240,36 @@ impl Sloped {
     }
 }
 
-/// The source return of `cell` (in source `row`: no division per
-/// return) moved into the target: where it lands (image
-/// coordinates), with its normal into `normal` where one is asked for;
-/// `None` without a return, or where it lands across the seam of the sweep.
-pub(super) fn warp_vertex<const LINES: bool>(
-    source: &Source,
-    target: &Target,
-    geometry: &ImageGeometry,
-    scan_offset_ns: StampNs,
-    (row, cell, r): (usize, usize, &SourceReturn),
-    cache: &mut TransformCache<LINES>,
-    normal: Option<&mut Vector3<f64>>,
-) -> Option<Vertex> {
-    let range = f64::from(r.range_m);
-    if !range.is_finite() {
-        return None;
-    }
-    let d = r.direction;
-    let point = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * range;
-    let measured_ns = r.time_ns;
-    // It will be seen again about one scan later; refine with the firing time
-    // of the column it lands in (a rolling sweep fires columns at different times).
-    let seen_ns = measured_ns + scan_offset_ns;
-    let mut transform = cache.until(measured_ns, seen_ns);
-    let mut moved = transform.apply(&point);
-    // The moved return's angles: the source return's, turned by the motion.
-    let mut azimuth = r.azimuth_rad + turn_rad((point.x, point.y), (moved.x, moved.y));
-    let col = geometry.col_of(azimuth);
-    let column_ns = target.column_time_ns[col];
-    if column_ns != StampNs::MIN && column_ns != seen_ns {
-        // A return that lands across the seam of the sweep would be compared
-        // with one fired a whole period earlier or later: no difference there.
-        if (column_ns - seen_ns).abs() > scan_offset_ns.abs() / 4 {
-            return None;
-        }
-        transform = cache.until_column(measured_ns, col);
-        let landed = transform.apply(&point);
-        // Turned on from the first landing: a turn of the column's small
-        // time difference, always within the series' reach (from the
-        // source return it may be a large one again, through `atan2`).
-        azimuth += slight_turn_rad((moved.x, moved.y), (landed.x, landed.y));
-        moved = landed;
-    }
-    if let Some(normal) = normal {
-        let n = source.surfaces.normal[cell];
-        *normal =
-            transform.rotation * Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
-    }
-    let level_squared = moved.x * moved.x + moved.y * moved.y;
-    let level = level_squared.sqrt();
-    let elevation = r.elevation_rad
-        + turn_rad(
-            ((point.x * point.x + point.y * point.y).sqrt(), point.z),
-            (level, moved.z),
-        );
-    Some(Vertex {
-        position: moved,
-        row: geometry.row_f_at(elevation, (level_squared + moved.z * moved.z).sqrt(), row),
-        col: geometry.col_f(azimuth),
-        time_ns: measured_ns,
-    })
-}
-
-/// What the warp reads of one source return, gathered column by column
-/// ([`SourceReturn::column`]): the source's arrays are row-major, and a
-/// column's returns lie a whole image row apart in each of five of them
-/// (8-24 KiB strides, which share a handful of cache sets), so each
-/// return's warp began with misses; gathered first, a column's loads are
-/// all issued at once.
-#[derive(Clone, Copy)]
-pub(super) struct SourceReturn {
-    range_m: f32,
-    direction: [f32; 3],
-    time_ns: StampNs,
-    azimuth_rad: f64,
-    elevation_rad: f64,
-}
-
-impl SourceReturn {
-    /// The returns of source column `col`, top to bottom, into `column`.
-    pub(super) fn column(source: &Source, cols: usize, col: usize, column: &mut Vec<Self>) {
-        let s = source.surfaces;
-        column.clear();
-        column.extend(
-            (col..s.range_m.len())
-                .step_by(cols.max(1))
-                .map(|cell| Self {
-                    range_m: s.range_m[cell],
-                    direction: s.direction[cell],
-                    time_ns: source.time_ns[cell],
-                    azimuth_rad: s.azimuth_rad[cell],
-                    elevation_rad: s.elevation_rad[cell],
-                }),
-        );
-    }
-}
-
 /// [`turn_rad`] for a turn of a few milliradians (a column's time
 /// difference): its series' first four terms, whose remainder, below
 /// `u^9 / 9` with `u` at most 1/64, is 1e-17 rad at most.
-#[inline]
-fn slight_turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
-    let (cross, dot) = (ax * by - ay * bx, ax * bx + ay * by);
-    if dot > 0.0 && cross.abs() <= dot * (1.0 / 64.0) {
-        let u = cross / dot;
-        let v = u * u;
-        u * ((1.0 + v * ATAN_SERIES[1]) + v * v * (ATAN_SERIES[2] + v * ATAN_SERIES[3]))
+#[cfg(test)]
+fn slight_turn_rad(a: (f64, f64), b: (f64, f64)) -> f64 {
+    let (cross, dot) = cross_dot(a, b);
+    if slight(cross, dot) {
+        slight_series_rad(cross / dot)
     } else {
-        turn_rad((ax, ay), (bx, by))
+        turn_rad(a, b)
     }
+}
+
+/// Whether [`slight_series_rad`] takes the turn of `(cross, dot)`.
+#[inline]
+pub(super) fn slight(cross: f64, dot: f64) -> bool {
+    dot > 0.0 && cross.abs() <= dot * (1.0 / 64.0)
+}
+
+/// `atan(u)` by the series' first four terms, for `|u| <= 1/64`.
+#[inline]
+pub(super) fn slight_series_rad(u: f64) -> f64 {
+    let v = u * u;
+    u * ((1.0 + v * ATAN_SERIES[1]) + v * v * (ATAN_SERIES[2] + v * ATAN_SERIES[3]))
+}
+
+/// The cross and dot products of plane vectors `a` and `b`.
+#[inline]
+pub(super) fn cross_dot((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> (f64, f64) {
+    (ax * by - ay * bx, ax * bx + ay * by)
 }
 
 /// The angle from plane vector `a` to `b`, radians: `atan2(a x b, a . b)`,
@@ -355,29 +279,40 @@ fn slight_turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
 /// 4e-15 rad, a millionth of a millionth of a column); beyond its reach
 /// (near returns of the ego render) the engine's `atan2`, within 1e-12 rad
 /// of libm's and a third of its cost.
-fn turn_rad((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> f64 {
-    let (cross, dot) = (ax * by - ay * bx, ax * bx + ay * by);
-    if dot > 0.0 && cross.abs() <= SMALL_TURN_TAN * dot {
-        let u = cross / dot;
-        let v = u * u;
-        // atan(u) = u (1 - v/3 + v^2/5 - ...), in two interleaved halves
-        // (Estrin's scheme) to shorten the chain of dependent steps.
-        let v2 = v * v;
-        let even = ATAN_SERIES
-            .iter()
-            .step_by(2)
-            .rev()
-            .fold(0.0, |sum, &c| c + v2 * sum);
-        let odd = ATAN_SERIES
-            .iter()
-            .skip(1)
-            .step_by(2)
-            .rev()
-            .fold(0.0, |sum, &c| c + v2 * sum);
-        u * (even + v * odd)
+pub(super) fn turn_rad(a: (f64, f64), b: (f64, f64)) -> f64 {
+    let (cross, dot) = cross_dot(a, b);
+    if small(cross, dot) {
+        series_rad(cross / dot)
     } else {
         crate::engine::atan::atan2(cross, dot)
     }
+}
+
+/// Whether [`series_rad`] takes the turn of `(cross, dot)`.
+#[inline]
+pub(super) fn small(cross: f64, dot: f64) -> bool {
+    dot > 0.0 && cross.abs() <= SMALL_TURN_TAN * dot
+}
+
+/// `atan(u)` by its series, for `|u| <=` [`SMALL_TURN_TAN`]: `u (1 - v/3 +
+/// v^2/5 - ...)`, in two interleaved halves (Estrin's scheme) to shorten
+/// the chain of dependent steps.
+#[inline]
+pub(super) fn series_rad(u: f64) -> f64 {
+    let v = u * u;
+    let v2 = v * v;
+    let even = ATAN_SERIES
+        .iter()
+        .step_by(2)
+        .rev()
+        .fold(0.0, |sum, &c| c + v2 * sum);
+    let odd = ATAN_SERIES
+        .iter()
+        .skip(1)
+        .step_by(2)
+        .rev()
+        .fold(0.0, |sum, &c| c + v2 * sum);
+    u * (even + v * odd)
 }
 
 /// Largest `tan` of a turn taken by the series (9.5 degrees): its ninth
