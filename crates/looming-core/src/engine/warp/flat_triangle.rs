@@ -14,17 +14,64 @@ pub(super) struct FlatTriangle<'v> {
     /// Its third vertex's row and column.
     r2: f64,
     c2: f64,
+    edges: Edges,
+    /// The sign of its orientation (of `Edges::of`'s sum): `-1` or `1`.
+    sign: f64,
+    pub edge: bool,
+}
+
+/// A triangle's edge functions from its third vertex, for the barycentric
+/// tests (shared by [`FlatTriangle`] and the rasteriser's whole quads).
+pub(super) struct Edges {
     /// `[r1 - r2, c2 - c1, r2 - r0, c0 - c2]`, times the sign of the
     /// denominator.
     steps: [f64; 4],
     /// `|(r1 - r2)(c0 - c2) + (c2 - c1)(r0 - r2)|`, twice the area.
-    denominator: f64,
-    /// The sign of that sum (the triangle's orientation): `-1` or `1`.
-    sign: f64,
+    pub denominator: f64,
     /// How far outside, in the weights' units times `denominator`, a ray
     /// still counts as inside.
-    tolerance: f64,
-    pub edge: bool,
+    pub tolerance: f64,
+}
+
+impl Edges {
+    /// The edge functions of the triangle of rows `r` and columns `c`, with
+    /// the sign of its orientation; `None` where degenerate.
+    #[inline(always)]
+    pub fn of(r: &[f64; 3], c: &[f64; 3]) -> Option<(Self, f64)> {
+        let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
+        if denominator.abs() < 1e-12 {
+            return None;
+        }
+        let sign = if denominator < 0.0 { -1.0 } else { 1.0 };
+        Some((
+            Self {
+                steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
+                denominator: denominator.abs(),
+                tolerance: EDGE_WEIGHT * denominator.abs(),
+            },
+            sign,
+        ))
+    }
+
+    /// Weight `k` (0 or 1) of the ray `(dc, dr)` from the third vertex,
+    /// times the denominator.
+    #[inline(always)]
+    pub fn scaled(&self, k: usize, dc: f64, dr: f64) -> f64 {
+        self.steps[2 * k] * dc + self.steps[2 * k + 1] * dr
+    }
+
+    /// The weights from the first two times the denominator, where all
+    /// three lie inside.
+    #[inline(always)]
+    pub fn weights_of(&self, s0: f64, s1: f64) -> Option<[f64; 3]> {
+        let s2 = self.denominator - s0 - s1;
+        if s0 < -self.tolerance || s1 < -self.tolerance || s2 < -self.tolerance {
+            return None;
+        }
+        let inverse = 1.0 / self.denominator;
+        let (w0, w1) = (s0 * inverse, s1 * inverse);
+        Some([w0, w1, 1.0 - w0 - w1])
+    }
 }
 
 impl<'v> FlatTriangle<'v> {
@@ -59,19 +106,13 @@ impl<'v> FlatTriangle<'v> {
     /// The set-up once the span is checked: `None` where degenerate.
     #[inline]
     fn spanning(v: [&'v Vertex; 3], (r, c): (&[f64; 3], &[f64; 3]), edge: bool) -> Option<Self> {
-        let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
-        if denominator.abs() < 1e-12 {
-            return None;
-        }
-        let sign = if denominator < 0.0 { -1.0 } else { 1.0 };
+        let (edges, sign) = Edges::of(r, c)?;
         Some(Self {
             v,
             r2: r[2],
             c2: c[2],
-            steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
-            denominator: denominator.abs(),
+            edges,
             sign,
-            tolerance: EDGE_WEIGHT * denominator.abs(),
             edge,
         })
     }
@@ -81,37 +122,17 @@ impl<'v> FlatTriangle<'v> {
     #[inline]
     pub fn weights(&self, tr: f64, tc: f64) -> Option<[f64; 3]> {
         let (dc, dr) = (tc - self.c2, tr - self.r2);
-        self.weights_given(dc, dr, self.scaled_weight(0, dc, dr))
+        self.weights_given(dc, dr, self.edges.scaled(0, dc, dr))
     }
 
     /// [`Self::weights`] of the ray `(dc, dr)` from the third vertex, its
     /// first weight (times the denominator) `s0` known.
     #[inline]
     fn weights_given(&self, dc: f64, dr: f64, s0: f64) -> Option<[f64; 3]> {
-        if s0 < -self.tolerance {
+        if s0 < -self.edges.tolerance {
             return None;
         }
-        self.weights_of(s0, self.scaled_weight(1, dc, dr))
-    }
-
-    /// Weight `k` (0 or 1) of the ray `(dc, dr)` from the third vertex,
-    /// times the denominator.
-    #[inline]
-    fn scaled_weight(&self, k: usize, dc: f64, dr: f64) -> f64 {
-        self.steps[2 * k] * dc + self.steps[2 * k + 1] * dr
-    }
-
-    /// The weights from the first two times the denominator, where all
-    /// three lie inside.
-    #[inline]
-    fn weights_of(&self, s0: f64, s1: f64) -> Option<[f64; 3]> {
-        let s2 = self.denominator - s0 - s1;
-        if s0 < -self.tolerance || s1 < -self.tolerance || s2 < -self.tolerance {
-            return None;
-        }
-        let inverse = 1.0 / self.denominator;
-        let (w0, w1) = (s0 * inverse, s1 * inverse);
-        Some([w0, w1, 1.0 - w0 - w1])
+        self.edges.weights_of(s0, self.edges.scaled(1, dc, dr))
     }
 }
 
@@ -155,14 +176,14 @@ impl<'t, 'v> SharedDiagonal<'t, 'v> {
     pub fn weights(&self, tr: f64, tc: f64) -> [Option<[f64; 3]>; 2] {
         // Both triangles' third vertex is `c`: the same differences.
         let (dc, dr) = (tc - self.first.c2, tr - self.first.r2);
-        let diagonal = self.first.scaled_weight(0, dc, dr);
+        let diagonal = self.first.edges.scaled(0, dc, dr);
         let first = self.first.weights_given(dc, dr, diagonal);
         let of_d = self.factor * diagonal;
-        let second = if of_d < -self.second.tolerance {
+        let second = &self.second.edges;
+        let second = if of_d < -second.tolerance {
             None
         } else {
-            let of_b = self.second.scaled_weight(0, dc, dr);
-            self.second.weights_of(of_b, of_d)
+            second.weights_of(second.scaled(0, dc, dr), of_d)
         };
         [first, second]
     }

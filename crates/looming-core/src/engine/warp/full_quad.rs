@@ -8,63 +8,11 @@
 //! `rasterize_quad` on the quad's two triangles: the same differences,
 //! products and sums, only taken once for both.
 
-use super::flat_triangle::EDGE_WEIGHT;
+use super::flat_triangle::Edges;
 use super::mesh::{EDGE_FIRST, EDGE_SECOND};
-use super::raster::{
-    MAX_SPAN_CELLS, TrianglePlane, box_in_reach, hit, index_of, least, most, within_bands,
-};
+use super::raster::{MAX_SPAN_CELLS, TrianglePlane, hit, least, most, quad_cells};
 use super::{Candidate, REACH_SLACK, Target, Vertex};
 use crate::engine::grid::ImageGeometry;
-
-/// One triangle's ray test: its two edge functions from the third vertex
-/// `c` (times the sign of the orientation), twice its area and the
-/// tolerance (as `FlatTriangle`'s).
-struct Edges {
-    steps: [f64; 4],
-    denominator: f64,
-    tolerance: f64,
-}
-
-impl Edges {
-    /// `None` where degenerate. `r`, `c`: the rows and columns of the
-    /// triangle's vertices, the third being the quad's `c`.
-    #[inline(always)]
-    fn of(r: [f64; 3], c: [f64; 3]) -> Option<(Self, f64)> {
-        let denominator = (r[1] - r[2]) * (c[0] - c[2]) + (c[2] - c[1]) * (r[0] - r[2]);
-        if denominator.abs() < 1e-12 {
-            return None;
-        }
-        let sign = if denominator < 0.0 { -1.0 } else { 1.0 };
-        let denominator = denominator.abs();
-        Some((
-            Self {
-                steps: [r[1] - r[2], c[2] - c[1], r[2] - r[0], c[0] - c[2]].map(|k| k * sign),
-                denominator,
-                tolerance: EDGE_WEIGHT * denominator,
-            },
-            sign,
-        ))
-    }
-
-    /// Edge function `k` (0 or 1) of the ray `(dc, dr)` from `c`.
-    #[inline(always)]
-    fn scaled(&self, k: usize, dc: f64, dr: f64) -> f64 {
-        self.steps[2 * k] * dc + self.steps[2 * k + 1] * dr
-    }
-
-    /// The weights from the first two scaled ones, where all three lie
-    /// inside (`FlatTriangle::weights_of`).
-    #[inline(always)]
-    fn weights_of(&self, s0: f64, s1: f64) -> Option<[f64; 3]> {
-        let s2 = self.denominator - s0 - s1;
-        if s0 < -self.tolerance || s1 < -self.tolerance || s2 < -self.tolerance {
-            return None;
-        }
-        let inverse = 1.0 / self.denominator;
-        let (w0, w1) = (s0 * inverse, s1 * inverse);
-        Some([w0, w1, 1.0 - w0 - w1])
-    }
-}
 
 /// The whole quad `(a, b, c, d)` (a's row `bits` of the scan's table)
 /// rasterised into `out`: `false`, with nothing done, where it is not the
@@ -105,19 +53,15 @@ pub(super) fn rasterize_full_quad(
         return false;
     }
     let (Some((first, sign_first)), Some((second, sign_second))) = (
-        Edges::of([ra, rb, rc], [ca, cb, cc]),
-        Edges::of([rb, rd, rc], [cb, cd, cc]),
+        Edges::of(&[ra, rb, rc], &[ca, cb, cc]),
+        Edges::of(&[rb, rd, rc], &[cb, cd, cc]),
     ) else {
         return false;
     };
     // The second's weight of d is the first's of a times this.
     let factor = -(sign_first * sign_second);
     let ((row_lo, row_hi), (col_lo, col_hi)) =
-        box_in_reach(target, geometry, (r_min, r_max), (c_min, c_max));
-    let (col_lo, col_hi) = (index_of(col_lo), index_of(col_hi));
-    let bands = &target.bands;
-    let (row_lo, row_hi) = within_bands(&bands.row_spans, (row_lo, row_hi), (r_min, r_max));
-    let (col_lo, col_hi) = within_bands(&bands.col_spans, (col_lo, col_hi), (c_min, c_max));
+        quad_cells(target, geometry, (r_min, r_max), (c_min, c_max));
     let mut planes: [Option<TrianglePlane>; 2] = [None, None];
     let edges = [bits & EDGE_FIRST != 0, bits & EDGE_SECOND != 0];
     for row in row_lo..=row_hi {

@@ -315,11 +315,7 @@ fn rasterize_quad<'v>(
     }
     let mut planes = [None, None];
     let ((row_lo, row_hi), (col_lo, col_hi)) =
-        box_in_reach(target, geometry, (r_min, r_max), (c_min, c_max));
-    let (col_lo, col_hi) = (index_of(col_lo), index_of(col_hi));
-    let bands = &target.bands;
-    let (row_lo, row_hi) = within_bands(&bands.row_spans, (row_lo, row_hi), (r_min, r_max));
-    let (col_lo, col_hi) = within_bands(&bands.col_spans, (col_lo, col_hi), (c_min, c_max));
+        quad_cells(target, geometry, (r_min, r_max), (c_min, c_max));
     let shared = first
         .as_ref()
         .zip(second.as_ref())
@@ -358,7 +354,7 @@ fn rasterize_quad<'v>(
 /// hold rays in the box, or, rarely, ones the weights reject.) `lo > hi`
 /// where none is left.
 #[inline]
-pub(super) fn within_bands(
+fn within_bands(
     spans: &[Span],
     (mut lo, mut hi): (usize, usize),
     (min, max): (f64, f64),
@@ -500,7 +496,7 @@ fn cells_in_reach(
 /// target's reach (about half a cell, where the whole cells around the box
 /// hold some three times as many).
 #[inline]
-pub(super) fn box_in_reach(
+fn box_in_reach(
     target: &Target,
     geometry: &ImageGeometry,
     (r_min, r_max): (f64, f64),
@@ -514,12 +510,32 @@ pub(super) fn box_in_reach(
     ((row_lo, row_hi), (col_lo, col_hi))
 }
 
+/// The target cells whose rays can lie in a quad's box of rows `[r_min,
+/// r_max]` and columns `[c_min, c_max]` (away from the seam):
+/// [`box_in_reach`]'s as indices, less the rows and columns at its ends
+/// that [`within_bands`] drops (`lo > hi` where none is left).
+#[inline]
+pub(super) fn quad_cells(
+    target: &Target,
+    geometry: &ImageGeometry,
+    rows: (f64, f64),
+    cols: (f64, f64),
+) -> ((usize, usize), (usize, usize)) {
+    let ((row_lo, row_hi), (col_lo, col_hi)) = box_in_reach(target, geometry, rows, cols);
+    let (col_lo, col_hi) = (index_of(col_lo), index_of(col_hi));
+    let bands = &target.bands;
+    (
+        within_bands(&bands.row_spans, (row_lo, row_hi), rows),
+        within_bands(&bands.col_spans, (col_lo, col_hi), cols),
+    )
+}
+
 /// A whole coordinate as an index, as `x as usize` takes it for every
 /// `x` below 2^63 (negative and NaN to 0), and `i64::MAX` above (which no
 /// index reaches either): half the instructions of the unsigned
 /// conversion, four per quad.
 #[inline(always)]
-pub(super) fn index_of(x: f64) -> usize {
+fn index_of(x: f64) -> usize {
     (x as i64).max(0) as usize
 }
 
