@@ -1,8 +1,7 @@
-//! The source's returns moved to the target: each return moved by the
-//! trajectory from its own time to the time the target fires the column it
-//! lands in ([`warp_vertex`]), with the relative transforms of one column's
-//! returns cached ([`TransformCache`]) and the angles turned by a short
-//! series ([`turn_rad`]).
+//! What moving the source's returns to the target takes (the moves
+//! themselves, column by column, in `moved_column.rs`): the relative
+//! transforms of one column's returns, cached ([`TransformCache`]), and
+//! the angles turned by a short series ([`turn_rad`]).
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
