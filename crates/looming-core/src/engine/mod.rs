@@ -284,10 +284,9 @@ fn compute_from_surfaces(
         previous.time_span_ns().0 - 1_000_000,
         current.time_span_ns().1 + 1_000_000,
     );
-    let source = warp::Source {
-        surfaces: prev_surfaces,
-        time_ns: &prev_time,
-    };
+    let source = timed(&mut times.renders_s, || {
+        warp::Source::new(prev_surfaces, &prev_time)
+    });
     let target = warp::Target::new(cur_surfaces, &coords, &column_time);
     let offset_ns = current.stamp_ns - previous.stamp_ns;
     let estimated = if wants_motion_estimate(config, &geometry, &pair.motion) {

@@ -15,6 +15,7 @@ mod mesh;
 mod moved_column;
 mod moved_vertices;
 mod raster;
+mod source_columns;
 
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -29,12 +30,25 @@ pub(super) use mesh::mesh_joins;
 use moved_column::{ColumnRows, ColumnWarp};
 use moved_vertices::arrival_poses;
 use raster::{rasterize_columns, rasterize_ring};
+use source_columns::SourceColumns;
 
 /// One scan's surface, ready to be warped.
 pub(crate) struct Source<'a> {
     pub surfaces: &'a Surfaces,
-    /// Absolute time of each cell's return, ns (meaningful where range is set).
-    pub time_ns: &'a [StampNs],
+    /// The fields the warp reads, column-major (with each return's time),
+    /// transposed once for every render of the pair.
+    columns: SourceColumns,
+}
+
+impl<'a> Source<'a> {
+    /// The surface `surfaces`, the absolute time of each cell's return
+    /// `time_ns` (meaningful where a range is set).
+    pub fn new(surfaces: &'a Surfaces, time_ns: &[StampNs]) -> Self {
+        Self {
+            surfaces,
+            columns: SourceColumns::of(surfaces, time_ns),
+        }
+    }
 }
 
 /// The rays to render into.
@@ -254,33 +268,6 @@ impl Vertices {
     }
 }
 
-/// Per source column, whether its occupied cells share one time: one pass
-/// over the rows (the image is row-major; walking it column by column
-/// strode across the whole image per cell).
-fn columns_sharing_time(source: &Source, geometry: &ImageGeometry) -> Vec<bool> {
-    let cols = geometry.cols.max(1);
-    let mut first: Vec<Option<StampNs>> = vec![None; cols];
-    let mut shares = vec![true; cols];
-    let rows = source
-        .surfaces
-        .range_m
-        .chunks(cols)
-        .zip(source.time_ns.chunks(cols));
-    for (ranges, times) in rows {
-        for (((range, &time_ns), first), shares) in
-            ranges.iter().zip(times).zip(&mut first).zip(&mut shares)
-        {
-            if range.is_finite() {
-                match *first {
-                    None => *first = Some(time_ns),
-                    Some(first_ns) => *shares &= first_ns == time_ns,
-                }
-            }
-        }
-    }
-    shares
-}
-
 pub fn render(
     source: &Source,
     target: &Target,
@@ -303,7 +290,7 @@ pub fn render(
             Vec::new()
         },
     };
-    let shares = columns_sharing_time(source, geometry);
+    let shares = &source.columns.shares_time;
     // Column by column: the returns of one column share a firing time, so the
     // relative transforms are computed once per column, not once per return.
     // (A column whose returns do not share their time, KITTI's, takes its

@@ -85,7 +85,7 @@ impl ColumnWarp<'_, '_> {
         (column, normals): (&mut [Vertex], &mut [Vector3<f64>]),
         rows: &mut ColumnRows,
     ) {
-        rows.gather(self.source, (column.len(), self.geometry.cols), col);
+        rows.gather(self.source, column.len(), col);
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
         if rows.live > 0 {
             // Returns sharing a time share their first transform: their
@@ -117,28 +117,26 @@ impl ColumnWarp<'_, '_> {
 }
 
 impl ColumnRows {
-    /// The returns of source column `col` with one, in order: the
-    /// source's arrays are row-major, and a column's returns lie a whole
-    /// image row apart in each of five of them (8-24 KiB strides, which
-    /// share a handful of cache sets), so that gathered first, a column's
-    /// loads are all issued at once. Every row is written, the count of
-    /// returns moved on past those with one (no branch on the sky's rows).
-    fn gather(&mut self, source: &Source, (rows, cols): (usize, usize), col: usize) {
-        let s = source.surfaces;
+    /// The returns of source column `col` with one, in order, from the
+    /// pair's column-major table (`source_columns.rs`: the row-major
+    /// arrays hold a column's returns a whole image row apart). Every row
+    /// is read, the count of returns moved on past those with one (no
+    /// branch on the sky's rows).
+    fn gather(&mut self, source: &Source, rows: usize, col: usize) {
+        let table = &source.columns;
         self.resize(rows);
+        let first = col * rows;
         let mut live = 0;
-        for (row, cell) in (col..s.range_m.len()).step_by(cols.max(1)).enumerate() {
-            let range = f64::from(s.range_m[cell]);
-            let d = s.direction[cell];
-            let point = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2])) * range;
-            for (axis, value) in self.point.iter_mut().zip(point.iter()) {
-                axis[live] = *value;
+        for row in 0..rows {
+            let at = first + row;
+            for (axis, column) in self.point.iter_mut().zip(&table.point) {
+                axis[live] = column[at];
             }
             self.row[live] = row;
-            self.time_ns[live] = source.time_ns[cell];
-            self.source_azimuth_rad[live] = s.azimuth_rad[cell];
-            self.source_elevation_rad[live] = s.elevation_rad[cell];
-            live += usize::from(range.is_finite());
+            self.time_ns[live] = table.time_ns[at];
+            self.source_azimuth_rad[live] = table.azimuth_rad[at];
+            self.source_elevation_rad[live] = table.elevation_rad[at];
+            live += usize::from(table.range_m[at].is_finite());
         }
         self.live = live;
         self.landing[..live].fill(Landing::Seen);
