@@ -555,8 +555,8 @@ fn to_instant(
 struct InstantVelocities {
     source_hint: usize,
     hint: usize,
-    /// By column: (time ns, velocity m/s and speed m/s then).
-    by_column: Vec<Option<(StampNs, Option<(nalgebra::Vector3<f64>, f64)>)>>,
+    /// By column: the time, ns, and the velocity then, if known.
+    by_column: Vec<Option<(StampNs, Option<VelocityAndSpeed>)>>,
 }
 
 impl InstantVelocities {
@@ -575,7 +575,7 @@ impl InstantVelocities {
         motion: &PairMotion,
         col: usize,
         time_ns: StampNs,
-    ) -> Option<(nalgebra::Vector3<f64>, f64)> {
+    ) -> Option<VelocityAndSpeed> {
         match self.by_column[col] {
             Some((known_ns, known)) if known_ns == time_ns => known,
             _ => {
@@ -588,6 +588,9 @@ impl InstantVelocities {
         }
     }
 }
+
+/// An ego velocity, m/s, and its norm, the speed, m/s.
+type VelocityAndSpeed = (nalgebra::Vector3<f64>, f64);
 
 /// Below this mean speed the ratio of speeds means nothing.
 const MIN_SPEED_FOR_INSTANT_MPS: f64 = 0.1;

@@ -238,13 +238,8 @@ pub fn compute_with_cache(
         || Surfaces::estimate(current, &cur_image, &geometry, params, cur_applied),
     );
     times.plane_fits_s = started.elapsed().as_secs_f64();
-    // The previous scan's cell times as the cache kept them (computed when
-    // it was the current scan), else computed here.
     let (prev_time, cur_time) = timed(&mut times.cell_times_s, || {
-        (
-            prev_time.unwrap_or_else(|| cell_times(previous, &prev_image)),
-            cell_times(current, &cur_image),
-        )
+        pair_cell_times((previous, &prev_image, prev_time), (current, &cur_image))
     });
     let result = compute_from_surfaces(
         pair,
@@ -437,6 +432,18 @@ fn pair_looming(
         point_threat,
         stage_times: StageTimes::default(),
     }
+}
+
+/// Both scans' [`cell_times`]: the previous scan's as the cache kept them
+/// (computed when it was the current scan), else computed here.
+fn pair_cell_times(
+    (previous, prev_image, kept): (&Scan, &RangeImage, Option<Vec<StampNs>>),
+    (current, cur_image): (&Scan, &RangeImage),
+) -> (Vec<StampNs>, Vec<StampNs>) {
+    (
+        kept.unwrap_or_else(|| cell_times(previous, prev_image)),
+        cell_times(current, cur_image),
+    )
 }
 
 /// Absolute time of each cell's return, ns.
