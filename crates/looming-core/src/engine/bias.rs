@@ -223,10 +223,10 @@ fn window_points(
     let cols = geometry.cols;
     points.clear();
     let mut per_row = [0usize; 2];
+    let window_cols = window_columns(col, cols);
     for (side, r) in rows.into_iter().enumerate() {
         let Some(r) = r else { continue };
-        for offset in 0..=2 * HALF_COLS {
-            let c = (col + cols + offset - HALF_COLS) % cols;
+        for &c in &window_cols {
             if let Some(p) = point(scan, image, r * cols + c)
                 && (p.norm() - range).abs() <= 0.1 * range + 0.3
             {
@@ -236,6 +236,20 @@ fn window_points(
         }
     }
     per_row
+}
+
+/// The columns `col - HALF_COLS ..= col + HALF_COLS`, wrapped around the
+/// sweep of `cols` columns: one division per window, then subtractions,
+/// not a division per return read (they were most of [`window_points`]).
+fn window_columns(col: usize, cols: usize) -> [usize; 2 * HALF_COLS + 1] {
+    let first = (col + cols - HALF_COLS) % cols;
+    std::array::from_fn(|offset| {
+        let mut c = first + offset;
+        while c >= cols {
+            c -= cols;
+        }
+        c
+    })
 }
 
 /// The largest distance of `points` from the plane (0 for none).

@@ -45,6 +45,18 @@ struct Raw {
     dt_s: f32,
 }
 
+impl Raw {
+    /// A cell without a current return.
+    const EMPTY: Self = Self {
+        l_lidar: f32::NAN,
+        l_ray_ego: f32::NAN,
+        sigma: f32::NAN,
+        sigma_ego: f32::NAN,
+        mask: mask::EMPTY,
+        dt_s: f32::NAN,
+    };
+}
+
 /// Every cell's values from the current surfaces and times and the renders
 /// of the previous surface moved by the rotation and, with a velocity, by the
 /// full ego motion.
@@ -158,7 +170,9 @@ impl RawFields {
 
 /// The first pass: every cell's differences, noise and mask
 /// ([`raw_cell`]), taken to the current return's instant ([`to_instant`])
-/// where the ego motion is known.
+/// where the ego motion is known. Row by row: the row's range noise and its
+/// sigmas per support ([`RowNoise`]) come once per row, not from a division
+/// and two square roots per cell.
 fn raw_cells(
     config: &EngineConfig,
     geometry: &ImageGeometry,
@@ -168,32 +182,74 @@ fn raw_cells(
     moved: Option<&warp::Rendered>,
     (motion, estimate): (&PairMotion, Option<&EgoEstimate>),
 ) -> Vec<Raw> {
-    (0..geometry.cells())
-        .into_par_iter()
-        // The motion series' positions of the last source and current
-        // times, per worker (neighbouring cells' times are close).
-        .map_init(
-            || [0, 0],
-            |hints, cell| {
-                let raw = raw_cell(
+    let cols = geometry.cols;
+    let mut raw = vec![Raw::EMPTY; geometry.cells()];
+    raw.par_chunks_mut(cols).enumerate().for_each_init(
+        || InstantVelocities::new(cols),
+        |velocities, (row, raw_row)| {
+            let mut noise = RowNoise::new(current.noise_m_per_row[row]);
+            for (col, raw) in raw_row.iter_mut().enumerate() {
+                let cell = row * cols + col;
+                let value = raw_cell(
                     config,
                     (current, current_time),
                     rotated,
                     (moved, estimate),
-                    cell,
+                    (cell, &mut noise),
                 );
-                match moved {
+                *raw = match moved {
                     Some(moved) => to_instant(
-                        raw,
+                        value,
                         motion,
                         (moved.source_time_ns[cell], current_time[cell]),
-                        hints,
+                        (col, velocities),
                     ),
-                    None => raw,
-                }
-            },
-        )
-        .collect()
+                    None => value,
+                };
+            }
+        },
+    );
+    raw
+}
+
+/// One row's range noise and, per plane-fit support, the noise of the
+/// difference of a cell's two ranges ([`range_difference_sigma_m`]), worked
+/// out at the first cell of the row with that support: a row holds
+/// thousands of cells but a few supports.
+struct RowNoise {
+    noise_m: f64,
+    /// By support; NaN: not worked out yet.
+    difference_sigma_m: [f64; 256],
+}
+
+impl RowNoise {
+    fn new(noise_m: f32) -> Self {
+        Self {
+            noise_m: f64::from(noise_m),
+            difference_sigma_m: [f64::NAN; 256],
+        }
+    }
+
+    fn difference_sigma_m(&mut self, support: u8) -> f64 {
+        let known = &mut self.difference_sigma_m[usize::from(support)];
+        // (A NaN noise is worked out anew each time: the same NaN.)
+        if known.is_nan() {
+            *known = range_difference_sigma_m(self.noise_m, support);
+        }
+        *known
+    }
+}
+
+/// The noise of the difference of a cell's current range and the rendered
+/// previous one, metres, from the row's range noise `noise_m` and the
+/// returns the current plane fit had (`support`). Both ranges are plane
+/// fits of several returns; the rendered one mixes three vertices: about
+/// sigma / sqrt(2) each, conservatively.
+fn range_difference_sigma_m(noise_m: f64, support: u8) -> f64 {
+    let support = f64::from(support.max(1));
+    let sigma_now = noise_m * (1.0 / support).sqrt().max(0.4);
+    let sigma_before = noise_m * 0.6;
+    (sigma_now.powi(2) + sigma_before.powi(2)).sqrt()
 }
 
 /// A moving object is a patch spanning beams, not a lone noisy cell nor a
@@ -342,16 +398,9 @@ fn raw_cell(
     (current, current_time): (&Surfaces, &[StampNs]),
     rotated: &warp::Rendered,
     (moved, estimate): (Option<&warp::Rendered>, Option<&EgoEstimate>),
-    cell: usize,
+    (cell, noise): (usize, &mut RowNoise),
 ) -> Raw {
-    let nan = Raw {
-        l_lidar: f32::NAN,
-        l_ray_ego: f32::NAN,
-        sigma: f32::NAN,
-        sigma_ego: f32::NAN,
-        mask: mask::EMPTY,
-        dt_s: f32::NAN,
-    };
+    let nan = Raw::EMPTY;
     let range_now = f64::from(current.range_m[cell]);
     if !range_now.is_finite() {
         return nan;
@@ -417,13 +466,7 @@ fn raw_cell(
         }
         None => f64::NAN,
     };
-    // Both ranges are plane fits of several returns; the rendered one mixes
-    // three vertices: about sigma / sqrt(2) each, conservatively.
-    let support = f64::from(current.support[cell].max(1));
-    let noise_m = current.noise_m(cell);
-    let sigma_now = noise_m * (1.0 / support).sqrt().max(0.4);
-    let sigma_before = noise_m * 0.6;
-    let sigma = (sigma_now.powi(2) + sigma_before.powi(2)).sqrt() / (dt_s * range_now);
+    let sigma = noise.difference_sigma_m(current.support[cell]) / (dt_s * range_now);
     let sigma_ego = ray_ego_sigma(current, cell, l_ray_ego, estimate);
     Raw {
         l_lidar: l_lidar as f32,
@@ -475,21 +518,19 @@ fn ray_ego_sigma(
 /// speed, is that error: removed from both differences, which leaves `D`
 /// unchanged and corrects moving objects for the ego's share of the relative
 /// acceleration.
-/// (`hints`: the series' positions of the last two times asked, for
-/// [`PairMotion::velocity_near`].)
+/// (`col`: the cell's column, for [`InstantVelocities::current`].)
 fn to_instant(
     raw: Raw,
     motion: &PairMotion,
     (source_time_ns, time_ns): (StampNs, StampNs),
-    hints: &mut [usize; 2],
+    (col, velocities): (usize, &mut InstantVelocities),
 ) -> Raw {
     if !raw.l_ray_ego.is_finite() {
         return raw;
     }
-    let [source_hint, hint] = hints;
-    let (Some(before), Some(now)) = (
-        motion.velocity_near(source_time_ns, source_hint),
-        motion.velocity_near(time_ns, hint),
+    let (Some(before), Some((now, now_speed_mps))) = (
+        motion.velocity_near(source_time_ns, &mut velocities.source_hint),
+        velocities.current(motion, col, time_ns),
     ) else {
         return raw;
     };
@@ -497,13 +538,59 @@ fn to_instant(
     if mean_speed_mps < MIN_SPEED_FOR_INSTANT_MPS {
         return raw;
     }
-    let correction = ((now.norm() / mean_speed_mps - 1.0) * f64::from(raw.l_ray_ego)) as f32;
+    let correction = ((now_speed_mps / mean_speed_mps - 1.0) * f64::from(raw.l_ray_ego)) as f32;
     Raw {
         l_lidar: raw.l_lidar + correction,
         l_ray_ego: raw.l_ray_ego + correction,
         ..raw
     }
 }
+
+/// The ego velocities [`to_instant`] looks up, per worker: the series'
+/// positions of the last source and current times asked (neighbouring
+/// cells' times are close: [`PairMotion::velocity_near`]), and each
+/// column's last current time with the velocity and speed then, as a
+/// sensor that fires a column's lasers at once gives its cells one time:
+/// one lookup per column instead of one per cell.
+struct InstantVelocities {
+    source_hint: usize,
+    hint: usize,
+    /// By column: the time, ns, and the velocity then, if known.
+    by_column: Vec<Option<(StampNs, Option<VelocityAndSpeed>)>>,
+}
+
+impl InstantVelocities {
+    fn new(cols: usize) -> Self {
+        Self {
+            source_hint: 0,
+            hint: 0,
+            by_column: vec![None; cols],
+        }
+    }
+
+    /// The velocity and speed at `time_ns`, a current return's time in
+    /// column `col`.
+    fn current(
+        &mut self,
+        motion: &PairMotion,
+        col: usize,
+        time_ns: StampNs,
+    ) -> Option<VelocityAndSpeed> {
+        match self.by_column[col] {
+            Some((known_ns, known)) if known_ns == time_ns => known,
+            _ => {
+                let now = motion
+                    .velocity_near(time_ns, &mut self.hint)
+                    .map(|v| (v, v.norm()));
+                self.by_column[col] = Some((time_ns, now));
+                now
+            }
+        }
+    }
+}
+
+/// An ego velocity, m/s, and its norm, the speed, m/s.
+type VelocityAndSpeed = (nalgebra::Vector3<f64>, f64);
 
 /// Below this mean speed the ratio of speeds means nothing.
 const MIN_SPEED_FOR_INSTANT_MPS: f64 = 0.1;

@@ -106,6 +106,8 @@ struct CachedScan {
     ring_to_row: Option<Vec<usize>>,
     image: RangeImage,
     surfaces: Surfaces,
+    /// Each cell's return time ([`cell_times`]), ns.
+    time_ns: Vec<StampNs>,
     /// The motion estimated for the pair that ended at this scan (velocity,
     /// angular velocity): the next pair's first guess, as a vehicle's motion
     /// changes little in one scan period.
@@ -118,8 +120,7 @@ impl CachedScan {
     fn keep(
         pair: &ScanPair,
         geometry: &ImageGeometry,
-        image: RangeImage,
-        surfaces: Surfaces,
+        (image, surfaces, time_ns): (RangeImage, Surfaces, Vec<StampNs>),
         ego_estimate: Option<egomotion::EgoEstimate>,
     ) -> Self {
         let estimate = ego_estimate.map(|e| {
@@ -135,6 +136,7 @@ impl CachedScan {
             ring_to_row: geometry.ring_to_row.clone(),
             image,
             surfaces,
+            time_ns,
             estimate,
         }
     }
@@ -204,7 +206,7 @@ pub fn compute_with_cache(
     let started = std::time::Instant::now();
     let (previous_gridded, (cur_image, cur_bias)) = rayon::join(
         || match cached {
-            Some(c) => Ok((c.image, c.surfaces)),
+            Some(c) => Ok((c.image, c.surfaces, c.time_ns)),
             None => {
                 let image = RangeImage::build(previous, &geometry);
                 let bias = scan_bias(previous, &image, want_previous);
@@ -225,31 +227,33 @@ pub fn compute_with_cache(
     let cur_applied = cache.range_bias.update(cur_bias, rows);
     times.range_images_s = started.elapsed().as_secs_f64();
     let started = std::time::Instant::now();
-    let ((prev_image, prev_surfaces), cur_surfaces) = rayon::join(
+    let ((prev_image, prev_surfaces, prev_time), cur_surfaces) = rayon::join(
         || match previous_to_fit {
-            Ok(done) => done,
+            Ok((image, surfaces, time_ns)) => (image, surfaces, Some(time_ns)),
             Err((image, applied)) => {
                 let surfaces = Surfaces::estimate(previous, &image, &geometry, params, applied);
-                (image, surfaces)
+                (image, surfaces, None)
             }
         },
         || Surfaces::estimate(current, &cur_image, &geometry, params, cur_applied),
     );
     times.plane_fits_s = started.elapsed().as_secs_f64();
+    let (prev_time, cur_time) = timed(&mut times.cell_times_s, || {
+        pair_cell_times((previous, &prev_image, prev_time), (current, &cur_image))
+    });
     let result = compute_from_surfaces(
         pair,
         config,
         &geometry,
-        (&prev_image, &prev_surfaces),
-        (&cur_image, &cur_surfaces),
+        (&prev_surfaces, &prev_time),
+        (&cur_image, &cur_surfaces, &cur_time),
         (previous_estimate, times),
     );
     let estimate = result.as_ref().and_then(|r| r.ego_estimate);
     cache.keep(CachedScan::keep(
         pair,
         &geometry,
-        cur_image,
-        cur_surfaces,
+        (cur_image, cur_surfaces, cur_time),
         estimate,
     ));
     result
@@ -263,21 +267,16 @@ fn compute_from_surfaces(
     pair: &ScanPair,
     config: &EngineConfig,
     geometry: &ImageGeometry,
-    (prev_image, prev_surfaces): (&RangeImage, &Surfaces),
-    (cur_image, cur_surfaces): (&RangeImage, &Surfaces),
+    (prev_surfaces, prev_time): (&Surfaces, &[StampNs]),
+    (cur_image, cur_surfaces, cur_time): (&RangeImage, &Surfaces, &[StampNs]),
     (first_guess, mut times): (Option<MotionGuess>, StageTimes),
 ) -> Option<PairLooming> {
     let (previous, current) = (&*pair.previous, &*pair.current);
     let geometry = geometry.clone();
-    let (prev_time, cur_time, coords, column_time) = timed(&mut times.cell_times_s, || {
-        let cur_time = cell_times(current, cur_image);
-        let column_time = column_times(&cur_time, cur_surfaces, &geometry);
-        let coords = cell_coords(cur_surfaces, &geometry);
+    let (coords, column_time) = timed(&mut times.cell_times_s, || {
         (
-            cell_times(previous, prev_image),
-            cur_time,
-            coords,
-            column_time,
+            cell_coords(cur_surfaces, &geometry),
+            column_times(cur_time, cur_surfaces, &geometry),
         )
     });
     let span = (
@@ -285,7 +284,7 @@ fn compute_from_surfaces(
         current.time_span_ns().1 + 1_000_000,
     );
     let source = timed(&mut times.renders_s, || {
-        warp::Source::new(prev_surfaces, &prev_time)
+        warp::Source::new(prev_surfaces, prev_time)
     });
     let target = warp::Target::new(cur_surfaces, &coords, &column_time);
     let offset_ns = current.stamp_ns - previous.stamp_ns;
@@ -296,7 +295,7 @@ fn compute_from_surfaces(
                 &source,
                 &target,
                 &geometry,
-                (cur_surfaces, &cur_time),
+                (cur_surfaces, cur_time),
                 config,
                 span,
                 first_guess,
@@ -327,7 +326,7 @@ fn compute_from_surfaces(
         config,
         &geometry,
         cur_surfaces,
-        &cur_time,
+        cur_time,
         &rotated,
         moved.as_ref(),
         (motion, ego_estimate.as_ref()),
@@ -434,6 +433,18 @@ fn pair_looming(
     }
 }
 
+/// Both scans' [`cell_times`]: the previous scan's as the cache kept them
+/// (computed when it was the current scan), else computed here.
+fn pair_cell_times(
+    (previous, prev_image, kept): (&Scan, &RangeImage, Option<Vec<StampNs>>),
+    (current, cur_image): (&Scan, &RangeImage),
+) -> (Vec<StampNs>, Vec<StampNs>) {
+    (
+        kept.unwrap_or_else(|| cell_times(previous, prev_image)),
+        cell_times(current, cur_image),
+    )
+}
+
 /// Absolute time of each cell's return, ns.
 fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
     image
@@ -453,21 +464,26 @@ fn cell_times(scan: &Scan, image: &RangeImage) -> Vec<StampNs> {
 }
 
 /// Continuous (row, column) of each occupied cell's ray.
+/// Row by row: a cell's row from the row's chunk, not from a division per
+/// cell.
 fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)> {
-    surfaces
-        .elevation_rad
-        .par_iter()
-        .zip(&surfaces.azimuth_rad)
-        .zip(&surfaces.range_m)
+    let cols = geometry.cols;
+    let mut coords = vec![(0.0, 0.0); geometry.cells()];
+    coords
+        .par_chunks_mut(cols)
         .enumerate()
-        .map(|(cell, ((&elevation_rad, &azimuth_rad), &range_m))| {
-            // A return lies in or next to its own cell's row.
-            let own_row = cell / geometry.cols;
-            let row = geometry.row_f_at(elevation_rad, f64::from(range_m), own_row);
-            let col = geometry.col_f(azimuth_rad);
-            (row as f32, col as f32)
-        })
-        .collect()
+        .for_each(|(own_row, coords_row)| {
+            let first = own_row * cols;
+            for (cell, coords) in (first..).zip(coords_row) {
+                // A return lies in or next to its own cell's row.
+                let (elevation_rad, range_m) =
+                    (surfaces.elevation_rad[cell], surfaces.range_m[cell]);
+                let row = geometry.row_f_at(elevation_rad, f64::from(range_m), own_row);
+                let col = geometry.col_f(surfaces.azimuth_rad[cell]);
+                *coords = (row as f32, col as f32);
+            }
+        });
+    coords
 }
 
 /// Median firing time of each column of the current scan (`StampNs::MIN` for
@@ -479,12 +495,16 @@ fn column_times(
 ) -> Vec<StampNs> {
     (0..geometry.cols)
         .into_par_iter()
-        .map(|col| {
-            let mut times: Vec<StampNs> = (0..geometry.rows)
-                .map(|row| row * geometry.cols + col)
-                .filter(|&cell| surfaces.range_m[cell].is_finite())
-                .map(|cell| time_ns[cell])
-                .collect();
+        // One list per worker, refilled per column, not one allocated per
+        // column.
+        .map_init(Vec::new, |times: &mut Vec<StampNs>, col| {
+            times.clear();
+            times.extend(
+                (0..geometry.rows)
+                    .map(|row| row * geometry.cols + col)
+                    .filter(|&cell| surfaces.range_m[cell].is_finite())
+                    .map(|cell| time_ns[cell]),
+            );
             if times.is_empty() {
                 return StampNs::MIN;
             }
@@ -499,11 +519,14 @@ fn ego_looming(scan: &Scan, motion: &PairMotion) -> Vec<f32> {
     (0..scan.points_m.len())
         .into_par_iter()
         .map_init(
-            || 0,
-            |hint, i| {
+            || PointVelocity {
+                hint: 0,
+                last: None,
+            },
+            |at, i| {
                 let offset_s = scan.time_offset_s.as_ref().map_or(0.0, |t| f64::from(t[i]));
                 let t_ns = scan.stamp_ns + (offset_s * 1e9).round() as StampNs;
-                let Some(velocity) = motion.velocity_near(t_ns, hint) else {
+                let Some(velocity) = at.velocity(motion, t_ns) else {
                     return f32::NAN;
                 };
                 let p = scan.points_m[i];
@@ -512,6 +535,29 @@ fn ego_looming(scan: &Scan, motion: &PairMotion) -> Vec<f32> {
             },
         )
         .collect()
+}
+
+/// The ego velocity at a point's time, for [`ego_looming`]: the last
+/// point's again where the times are equal (a sensor fires a column's lasers
+/// at once, and a scan lists a column's returns together), else
+/// [`PairMotion::velocity_near`] from the last position in the series.
+struct PointVelocity {
+    hint: usize,
+    /// The last time asked, ns, and the velocity then.
+    last: Option<(StampNs, Option<Vector3<f64>>)>,
+}
+
+impl PointVelocity {
+    fn velocity(&mut self, motion: &PairMotion, t_ns: StampNs) -> Option<Vector3<f64>> {
+        match self.last {
+            Some((last_ns, velocity)) if last_ns == t_ns => velocity,
+            _ => {
+                let velocity = motion.velocity_near(t_ns, &mut self.hint);
+                self.last = Some((t_ns, velocity));
+                velocity
+            }
+        }
+    }
 }
 
 /// A point takes its cell's threat level when it is the surface the cell
