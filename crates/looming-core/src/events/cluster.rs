@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 
 use crate::engine::{ImageGeometry, NO_POINT, PairLooming, mask};
 use crate::model::Scan;
-use crate::objects::{NO_OBJECT, Object, PairObjects, cells_by_object};
+use crate::objects::{NO_OBJECT, Object, ObjectCells, PairObjects};
 
 use super::EventConfig;
 use super::corridor::Corridor;
@@ -136,7 +136,7 @@ pub fn hot_clusters(
     // an object's footprint).
     let object_cells = objects
         .filter(|_| !components.is_empty())
-        .map(|o| cells_by_object(&o.cell_object, o.objects.len()))
+        .map(|o| ObjectCells::of(&o.cell_object, o.objects.len()))
         .unwrap_or_default();
     components
         .into_iter()
@@ -307,7 +307,7 @@ fn cluster_looming(looming: &PairLooming, cells: &[usize]) -> f64 {
 /// ([`cluster_looming`]).
 fn describe(
     looming: &PairLooming,
-    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &[Vec<usize>]),
+    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &ObjectCells),
     (cells, looming_per_s): (&[usize], f64),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> Cluster {
@@ -334,7 +334,7 @@ fn describe(
         // one beside it never, whichever of its parts is hot.
         Some((objects, index)) => {
             let horizon_s = (1.0 / looming_per_s).clamp(0.0, PREDICTION_HORIZON_S);
-            let cells = object_cells.get(index).map_or(&[][..], Vec::as_slice);
+            let cells = object_cells.get(index).unwrap_or(&[]);
             object_offset_m(objects, (index, cells), (corridor, horizon_s), position)
         }
         None => points

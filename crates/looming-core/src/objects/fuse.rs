@@ -35,8 +35,9 @@
 //! scaled per object by how far the cells actually scatter about the
 //! object's value (never below the model).
 
+use super::ground::CellPoints;
 use super::measure::inverse_variance_mean;
-use super::{Object, PairObjects, cells_by_object};
+use super::{Object, ObjectCells, PairObjects, collect_bounded};
 use nalgebra::Vector3;
 
 use crate::engine::{PairLooming, ThreatLevel, mask};
@@ -104,85 +105,116 @@ pub fn fuse_objects(
     objects: &PairObjects,
     threat_ttc_s: &[f64; 3],
 ) -> FusionCounts {
+    let points = CellPoints::of(looming, scan);
+    let cells = ObjectCells::of(&objects.cell_object, objects.objects.len());
+    fuse_with_cells(looming, &points, objects, &cells, threat_ttc_s)
+}
+
+/// [`fuse_objects`] with the cells' returns (what `cell_point` gives: no
+/// cell's `EMPTY` bit changes here) and the cells of each object gathered.
+pub(super) fn fuse_with_cells(
+    looming: &mut PairLooming,
+    points: &CellPoints,
+    objects: &PairObjects,
+    cells_of: &ObjectCells,
+    threat_ttc_s: &[f64; 3],
+) -> FusionCounts {
     let mut counts = FusionCounts::default();
-    let cells_of = cells_by_object(&objects.cell_object, objects.objects.len());
-    for (object, cells) in objects.objects.iter().zip(&cells_of) {
+    for (object, cells) in objects.objects.iter().zip(cells_of.iter()) {
         counts.confirmed_moving += confirm_moving_cells(looming, object, cells, threat_ttc_s);
-        let Some(value) = object_value(object) else {
-            continue;
-        };
-        let scale = noise_scale(looming, cells, value.0);
-        if scale > MAX_NOISE_SCALE {
-            // Its cells scatter far beyond their noise: several faces (a
-            // building's corner, a car seen at its corner) whose ray looming
-            // differs; one value does not stand for them.
-            continue;
-        }
-        let corroborating = cells
-            .iter()
-            .filter(|&&c| looming.mask[c] == 0 && consistent(looming, c, value, scale))
-            .count();
-        if corroborating < MIN_CORROBORATING_CELLS {
-            // No cell the engine trusts agrees: the value may be the
-            // artefact of its flagged cells (a parked car's silhouette
-            // sweeping over the background reads 4 1/s on edge cells).
-            continue;
-        }
-        let face = measured_face(looming, (scan, object), cells, value, scale);
-        // Across the rays an object's flagged cells are its outline sweeping
-        // over what lies beside and behind it (a crossing pedestrian's
-        // trailing side reads its front's looming): only what the engine
-        // trusted is combined, nothing filled.
-        let across = moves_across(object);
-        // Until its track tells (its first two pairs), a grazing or edge
-        // cell is not taken either: near grazing a curved object's ray
-        // looming is another's (a pedestrian's side, -5 1/s beside a front
-        // of 0.85), and at an occlusion edge an object crossing the rays
-        // sweeps (a crossing car's edge, segmented with the static object
-        // beside it, read that object's 0.80 1/s against a truth of -1.49).
-        let may_take = |looming: &PairLooming, cell: usize| match across {
-            Some(false) => true,
-            Some(true) => looming.mask[cell] == 0,
-            None => looming.mask[cell] & (mask::GRAZING | mask::EDGE) == 0,
-        };
-        // First the cells that measured the object, then those without a
-        // valid measurement.
-        let combined: Vec<usize> = cells
-            .iter()
-            .copied()
-            .filter(|&cell| {
-                may_take(looming, cell)
-                    && on_face(looming, scan, cell, face)
-                    && combine_cell(looming, cell, value, (scale, face))
-            })
-            .collect();
-        counts.combined += combined.len();
-        let may_fill = across != Some(true) && object.measured_cells >= MIN_CELLS_TO_FILL;
-        let fillable: Vec<usize> = cells
-            .iter()
-            .copied()
-            .filter(|_| may_fill)
-            .filter(|&cell| lacks_valid_value(looming, cell) && may_take(looming, cell))
-            .filter(|&cell| on_face(looming, scan, cell, face))
-            .collect();
-        for &cell in &fillable {
-            looming.fused[cell] = value.0 as f32;
-            looming.fused_sigma_per_s[cell] = value.1 as f32;
-            looming.mask[cell] = 0;
-        }
-        counts.filled += fillable.len();
-        // (Every changed cell's threat follows its new value: combined ones
-        // too when nothing is filled.)
-        for &cell in combined.iter().chain(&fillable) {
-            looming.threat[cell] = if looming.mask[cell] == 0 {
-                ThreatLevel::of(f64::from(looming.fused[cell]), threat_ttc_s)
-            } else {
-                ThreatLevel::None
-            };
-        }
+        let (combined, filled) = fuse_object(looming, (points, object), cells, threat_ttc_s);
+        counts.combined += combined;
+        counts.filled += filled;
     }
     refresh_point_threats(looming);
     counts
+}
+
+/// One object's looming fed back into its `cells` (see the module): how
+/// many cells were combined with it and how many filled.
+fn fuse_object(
+    looming: &mut PairLooming,
+    (points, object): (&CellPoints, &Object),
+    cells: &[usize],
+    threat_ttc_s: &[f64; 3],
+) -> (usize, usize) {
+    let Some(value) = object_value(object) else {
+        return (0, 0);
+    };
+    let (own, without) = split_by_own_value(looming, cells);
+    let scale = noise_scale(looming, &own, value.0);
+    if scale > MAX_NOISE_SCALE {
+        // Its cells scatter far beyond their noise: several faces (a
+        // building's corner, a car seen at its corner) whose ray looming
+        // differs; one value does not stand for them.
+        return (0, 0);
+    }
+    let corroborating = cells
+        .iter()
+        .filter(|&&c| looming.mask[c] == 0 && consistent(looming, c, value, scale))
+        .count();
+    if corroborating < MIN_CORROBORATING_CELLS {
+        // No cell the engine trusts agrees: the value may be the
+        // artefact of its flagged cells (a parked car's silhouette
+        // sweeping over the background reads 4 1/s on edge cells).
+        return (0, 0);
+    }
+    // Without a measured face no cell is on it: nothing to combine or fill.
+    let Some(face) = measured_face(looming, (points, object), &own, value, scale) else {
+        return (0, 0);
+    };
+    // Across the rays an object's flagged cells are its outline sweeping
+    // over what lies beside and behind it (a crossing pedestrian's
+    // trailing side reads its front's looming): only what the engine
+    // trusted is combined, nothing filled.
+    let across = moves_across(object);
+    // Until its track tells (its first two pairs), a grazing or edge
+    // cell is not taken either: near grazing a curved object's ray
+    // looming is another's (a pedestrian's side, -5 1/s beside a front
+    // of 0.85), and at an occlusion edge an object crossing the rays
+    // sweeps (a crossing car's edge, segmented with the static object
+    // beside it, read that object's 0.80 1/s against a truth of -1.49).
+    let may_take = |looming: &PairLooming, cell: usize| match across {
+        Some(false) => true,
+        Some(true) => looming.mask[cell] == 0,
+        None => looming.mask[cell] & (mask::GRAZING | mask::EDGE) == 0,
+    };
+    // First the cells that measured the object, then those without a
+    // valid measurement. (A cell's tests read only that cell, which only
+    // its own combining changes: the face's, which reads its return, last.)
+    let mut combined = Vec::with_capacity(own.len());
+    for &cell in &own {
+        if may_take(looming, cell)
+            && may_combine(looming, cell, value, (scale, &face))
+            && on_face(looming, points, cell, &face)
+        {
+            combine_cell(looming, cell, value, scale);
+            combined.push(cell);
+        }
+    }
+    let may_fill = across != Some(true) && object.measured_cells >= MIN_CELLS_TO_FILL;
+    let fillable = without
+        .iter()
+        .copied()
+        .filter(|_| may_fill)
+        .filter(|&cell| lacks_valid_value(looming, cell) && may_take(looming, cell))
+        .filter(|&cell| on_face(looming, points, cell, &face));
+    let fillable = collect_bounded(without.len(), fillable);
+    for &cell in &fillable {
+        looming.fused[cell] = value.0 as f32;
+        looming.fused_sigma_per_s[cell] = value.1 as f32;
+        looming.mask[cell] = 0;
+    }
+    // (Every changed cell's threat follows its new value: combined ones
+    // too when nothing is filled.)
+    for &cell in combined.iter().chain(&fillable) {
+        looming.threat[cell] = if looming.mask[cell] == 0 {
+            ThreatLevel::of(f64::from(looming.fused[cell]), threat_ttc_s)
+        } else {
+            ThreatLevel::None
+        };
+    }
+    (combined.len(), fillable.len())
 }
 
 /// The cells of an object moving on its own (its `D` significant over all
@@ -235,18 +267,30 @@ fn has_own_value(looming: &PairLooming, cell: usize) -> bool {
         && looming.sigma_per_s[cell].is_finite()
 }
 
-/// How many times the engine's noise model the object's cells scatter about
-/// `centre` (1.4826 times the median of `|fused - centre| / sigma`), at
-/// least 1.
-fn noise_scale(looming: &PairLooming, cells: &[usize], centre: f64) -> f64 {
-    let mut normalised: Vec<f64> = cells
-        .iter()
-        .filter(|&&c| has_own_value(looming, c))
-        .map(|&c| {
-            let sigma = f64::from(looming.fused_sigma_per_s[c]).max(1e-4);
-            (f64::from(looming.fused[c]) - centre).abs() / sigma
-        })
-        .collect();
+/// An object's cells that hold a value of their own ([`has_own_value`])
+/// and the others, each in order, told once for every test below that asks:
+/// combining a cell changes only that cell, and it still holds its own value.
+fn split_by_own_value(looming: &PairLooming, cells: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let (mut own, mut without) = (Vec::with_capacity(cells.len()), Vec::new());
+    for &cell in cells {
+        if has_own_value(looming, cell) {
+            own.push(cell);
+        } else {
+            without.push(cell);
+        }
+    }
+    (own, without)
+}
+
+/// How many times the engine's noise model an object's cells holding a
+/// value of their own (`own`) scatter about `centre` (1.4826 times the
+/// median of `|fused - centre| / sigma`), at least 1.
+fn noise_scale(looming: &PairLooming, own: &[usize], centre: f64) -> f64 {
+    let normalised = own.iter().map(|&c| {
+        let sigma = f64::from(looming.fused_sigma_per_s[c]).max(1e-4);
+        (f64::from(looming.fused[c]) - centre).abs() / sigma
+    });
+    let mut normalised = collect_bounded(own.len(), normalised);
     if normalised.is_empty() {
         return 1.0;
     }
@@ -274,30 +318,31 @@ struct Face {
 
 impl Face {
     /// How far the cell's return lies from the face's plane, m.
-    fn distance_m(&self, looming: &PairLooming, scan: &Scan, cell: usize) -> Option<f64> {
-        let p = super::ground::cell_point(looming, scan, cell)?;
+    fn distance_m(&self, points: &CellPoints, cell: usize) -> Option<f64> {
+        let p = points.get(cell)?;
         Some((self.normal.dot(&Vector3::from(p)) - self.offset_m).abs())
     }
 }
 
-/// The face of the cells consistent with the object's value; `None` with
-/// fewer than [`MIN_CELLS_TO_FILL`].
+/// The face of an object's cells holding a value of their own (`own`) that
+/// is consistent with the object's value; `None` with fewer than
+/// [`MIN_CELLS_TO_FILL`].
 fn measured_face(
     looming: &PairLooming,
-    (scan, object): (&Scan, &Object),
-    cells: &[usize],
+    (points, object): (&CellPoints, &Object),
+    own: &[usize],
     value: (f64, f64),
     scale: f64,
 ) -> Option<Face> {
-    let consistent_cells: Vec<(usize, Vector3<f64>)> = cells
+    let consistent_cells = own
         .iter()
         .copied()
-        .filter(|&c| has_own_value(looming, c) && consistent(looming, c, value, scale))
+        .filter(|&c| consistent(looming, c, value, scale))
         .filter_map(|c| {
             let normal = Vector3::from(looming.normal[c].map(f64::from));
             (normal.norm_squared() > 0.5).then_some((c, normal))
-        })
-        .collect();
+        });
+    let consistent_cells = collect_bounded(own.len(), consistent_cells);
     if consistent_cells.len() < MIN_CELLS_TO_FILL {
         return None;
     }
@@ -307,11 +352,11 @@ fn measured_face(
         .sum::<Vector3<f64>>();
     let resultant_length = sum.norm() / consistent_cells.len() as f64;
     let normal = sum.try_normalize(1e-9)?;
-    let mut offsets: Vec<f64> = consistent_cells
+    let offsets = consistent_cells
         .iter()
-        .filter_map(|&(c, _)| super::ground::cell_point(looming, scan, c))
-        .map(|p| normal.dot(&Vector3::from(p)))
-        .collect();
+        .filter_map(|&(c, _)| points.get(c))
+        .map(|p| normal.dot(&Vector3::from(p)));
+    let mut offsets = collect_bounded(consistent_cells.len(), offsets);
     if offsets.is_empty() {
         return None;
     }
@@ -370,38 +415,40 @@ fn measurement_agrees(looming: &PairLooming, cell: usize, value: f64) -> bool {
 /// ray looming of a cell seen obliquely is another (the trailing side of a
 /// crossing pedestrian: -1.7 1/s beside a front of 1.3). Where they
 /// scatter, a cell's incidence says nothing.
-fn masked_cell_may_measure(looming: &PairLooming, cell: usize, face: Option<Face>) -> bool {
+fn masked_cell_may_measure(looming: &PairLooming, cell: usize, face: &Face) -> bool {
     looming.mask[cell] == 0
-        || !face.is_some_and(|f| f.normals_agree)
+        || !face.normals_agree
         || f64::from(looming.incidence_cos[cell]) >= MIN_FACING_COS
 }
 
-/// Combine a cell's own value with its object's when they agree (see the
-/// module); whether it did.
-fn combine_cell(
-    looming: &mut PairLooming,
+/// Whether the own value of a cell that holds one ([`has_own_value`]) and
+/// its object's agree, to be combined (see the module).
+fn may_combine(
+    looming: &PairLooming,
     cell: usize,
     (value, se): (f64, f64),
-    (scale, face): (f64, Option<Face>),
+    (scale, face): (f64, &Face),
 ) -> bool {
-    if !has_own_value(looming, cell)
-        || !consistent(looming, cell, (value, se), scale)
+    if !consistent(looming, cell, (value, se), scale)
         || !measurement_agrees(looming, cell, value)
         || !masked_cell_may_measure(looming, cell, face)
     {
         return false;
     }
     let sigma = f64::from(looming.fused_sigma_per_s[cell]) * scale;
-    if sigma > MAX_COMBINED_SIGMA_PER_S {
-        // Agreement within a noise this large says nothing.
-        return false;
-    }
+    // Agreement within a noise this large says nothing.
+    let too_noisy = sigma > MAX_COMBINED_SIGMA_PER_S;
+    !too_noisy
+}
+
+/// Combine a cell's own value with its object's (where [`may_combine`]).
+fn combine_cell(looming: &mut PairLooming, cell: usize, (value, se): (f64, f64), scale: f64) {
+    let sigma = f64::from(looming.fused_sigma_per_s[cell]) * scale;
     let (fused, fused_sigma) =
         inverse_variance_mean((f64::from(looming.fused[cell]), sigma), (value, se));
     looming.fused[cell] = fused as f32;
     looming.fused_sigma_per_s[cell] = fused_sigma as f32;
     looming.mask[cell] &= !SOFT_FLAGS;
-    true
 }
 
 /// A return of the object without a valid measurement of its own: no
@@ -434,17 +481,14 @@ fn face_depth_m(object: &Object) -> f64 {
 /// Whether the cell's return lies on the object's measured face (within
 /// [`FACE_DEPTH_M`] of its plane): its ray looming is then about the face's
 /// (on a plane moving against the sensor it is the same along every ray).
-fn on_face(looming: &PairLooming, scan: &Scan, cell: usize, face: Option<Face>) -> bool {
-    let Some(face) = face else {
-        return false;
-    };
+fn on_face(looming: &PairLooming, points: &CellPoints, cell: usize, face: &Face) -> bool {
     let normal = Vector3::from(looming.normal[cell].map(f64::from));
     let turned_away = face.normals_agree
         && normal.norm_squared() > 0.5
         && normal.dot(&face.normal) < SAME_FACE_COS;
     !turned_away
         && face
-            .distance_m(looming, scan, cell)
+            .distance_m(points, cell)
             .is_some_and(|d| d <= face.depth_m)
 }
 

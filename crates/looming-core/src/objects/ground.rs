@@ -46,7 +46,16 @@ impl GroundFit {
     /// [`GroundFit::find`] with the pair's cell returns already gathered.
     pub fn find_in(looming: &PairLooming, points: &CellPoints) -> Option<Self> {
         let candidates = ground_candidates(looming, points);
-        let mut heights: Vec<f64> = candidates.iter().map(|(_, p)| p[2]).collect();
+        // Each candidate's return read again where wanted, from the dense
+        // gathered returns (a list of cells and returns was four times the
+        // memory, grown by doubling).
+        let candidate_points = || {
+            candidates
+                .iter()
+                .filter_map(|&cell| Some((cell, points.get(cell)?)))
+        };
+        let heights = candidate_points().map(|(_, p)| p[2]);
+        let mut heights = super::collect_bounded(candidates.len(), heights);
         let height = median(&mut heights)?;
         let near = |p: &[f64; 3]| {
             (p[2] - height).abs()
@@ -54,18 +63,17 @@ impl GroundFit {
         };
         // The plane's sums straight from the candidates near the height
         // (no list of them, wanted only where there are too few for a plane).
-        let (near_count, plane) = fit_plane(candidates.iter().map(|(_, p)| p).filter(|p| near(p)));
+        let (near_count, plane) = fit_plane(candidate_points().map(|(_, p)| p).filter(|p| near(p)));
         let plane = plane.filter(|_| near_count >= MIN_PLANE_CELLS);
-        let cells = match plane {
-            Some(plane) => candidates
-                .into_iter()
-                .filter(|(_, p)| {
-                    height_above(plane, p).abs()
-                        <= GROUND_PLANE_TOLERANCE_M + GROUND_PLANE_TOLERANCE_PER_M * horizontal(p)
-                })
-                .collect(),
-            None => candidates.into_iter().filter(|(_, p)| near(p)).collect(),
+        let on_ground = |p: &[f64; 3]| match plane {
+            Some(plane) => {
+                height_above(plane, p).abs()
+                    <= GROUND_PLANE_TOLERANCE_M + GROUND_PLANE_TOLERANCE_PER_M * horizontal(p)
+            }
+            None => near(p),
         };
+        let cells = candidate_points().filter(|(_, p)| on_ground(p));
+        let cells = super::collect_bounded(candidates.len(), cells);
         Some(Self {
             height_m: height,
             plane,
@@ -147,27 +155,24 @@ pub fn cell_point(looming: &PairLooming, scan: &Scan, cell: usize) -> Option<[f6
 
 /// Cells that may be ground: an upward normal within `GROUND_MAX_TILT_DEG` of
 /// z, and the return below the sensor.
-fn ground_candidates(looming: &PairLooming, points: &CellPoints) -> Vec<(usize, [f64; 3])> {
+fn ground_candidates(looming: &PairLooming, points: &CellPoints) -> Vec<usize> {
     let min_cos = GROUND_MAX_TILT_DEG.to_radians().cos();
-    // The normal first: it lies in a dense array, where the return is a
-    // lookup in the scan, wanted only for cells facing up.
-    (0..looming.mask.len())
-        .filter_map(|cell| {
-            let n = looming.normal.get(cell)?;
-            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
-            if !upward {
-                return None;
-            }
-            let p = points.get(cell)?;
-            (p[2] < 0.0).then_some((cell, p))
-        })
-        .collect()
+    // The normal first: it lies in a dense array, where the return is wanted
+    // only for cells facing up.
+    let candidates = (0..looming.mask.len()).filter(|&cell| {
+        let Some(n) = looming.normal.get(cell) else {
+            return false;
+        };
+        let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
+        upward && points.get(cell).is_some_and(|p| p[2] < 0.0)
+    });
+    super::collect_bounded(looming.mask.len(), candidates)
 }
 
 /// How many points there are, and the least-squares plane
 /// `z = a x + b y + c` through them.
-fn fit_plane<'a>(points: impl Iterator<Item = &'a [f64; 3]>) -> (usize, Option<[f64; 3]>) {
+fn fit_plane(points: impl Iterator<Item = [f64; 3]>) -> (usize, Option<[f64; 3]>) {
     let mut m = nalgebra::Matrix3::<f64>::zeros();
     let mut v = nalgebra::Vector3::<f64>::zeros();
     let mut count = 0;

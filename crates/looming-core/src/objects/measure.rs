@@ -20,8 +20,8 @@
 //! motion estimated from the scans, its covariance carried to the object),
 //! joins the measurement by inverse variance.
 
-use super::ground::cell_point;
-use super::{NO_OBJECT, Object, cells_by_object};
+use super::ground::{CellPoints, cell_point};
+use super::{NO_OBJECT, Object, ObjectCells, collect_bounded};
 use crate::engine::egomotion::EgoEstimate;
 use crate::engine::{PairLooming, mask};
 use crate::model::Scan;
@@ -41,14 +41,46 @@ const MOVING_MIN_PER_S: f64 = 0.15;
 /// The figures of every object labelled in `cell_object` (ids 0: not yet
 /// tracked).
 pub fn measure_objects(scan: &Scan, looming: &PairLooming, cell_object: &[u32]) -> Vec<Object> {
-    let count = cell_object
+    let cells = ObjectCells::of(cell_object, object_count(cell_object));
+    measure_each(
+        &|c| cell_point(looming, scan, c),
+        looming,
+        cell_object,
+        &cells,
+    )
+}
+
+/// [`measure_objects`] with the pair's cell returns already gathered (the
+/// same values `cell_point` gives, read in cell order), and the cells of
+/// each object.
+pub(super) fn measure_labelled(
+    points: &CellPoints,
+    looming: &PairLooming,
+    cell_object: &[u32],
+) -> (Vec<Object>, ObjectCells) {
+    let cells = ObjectCells::of(cell_object, object_count(cell_object));
+    let objects = measure_each(&|c| points.get(c), looming, cell_object, &cells);
+    (objects, cells)
+}
+
+/// How many objects `cell_object` labels: one past the largest label.
+fn object_count(cell_object: &[u32]) -> usize {
+    cell_object
         .iter()
         .filter(|&&o| o != NO_OBJECT)
         .map(|&o| o as usize + 1)
         .max()
-        .unwrap_or(0);
-    let cells = cells_by_object(cell_object, count);
-    let mut points = vec![0usize; count];
+        .unwrap_or(0)
+}
+
+/// Each object of `cells` measured, its returns given by `point_of`.
+fn measure_each(
+    point_of: &dyn Fn(usize) -> Option<[f64; 3]>,
+    looming: &PairLooming,
+    cell_object: &[u32],
+    cells: &ObjectCells,
+) -> Vec<Object> {
+    let mut points = vec![0usize; cells.len()];
     for &cell in &looming.image.point_surface {
         if cell != crate::engine::NO_POINT
             && let Some(&object) = cell_object.get(cell as usize)
@@ -60,16 +92,18 @@ pub fn measure_objects(scan: &Scan, looming: &PairLooming, cell_object: &[u32]) 
     cells
         .iter()
         .zip(points)
-        .map(|(cells, points)| measure(scan, looming, cells, points))
+        .map(|(cells, points)| measure(point_of, looming, cells, points))
         .collect()
 }
 
 /// One object of `cells`, `points` of the scan being their surfaces.
-fn measure(scan: &Scan, looming: &PairLooming, cells: &[usize], points: usize) -> Object {
-    let returns: Vec<[f64; 3]> = cells
-        .iter()
-        .filter_map(|&c| cell_point(looming, scan, c))
-        .collect();
+fn measure(
+    point_of: &dyn Fn(usize) -> Option<[f64; 3]>,
+    looming: &PairLooming,
+    cells: &[usize],
+    points: usize,
+) -> Object {
+    let returns = collect_bounded(cells.len(), cells.iter().filter_map(|&c| point_of(c)));
     let (nearest_range_m, centroid_m, min_m, max_m) = geometry_of(&returns);
     let measured = measuring_cells(looming, cells, |_| true);
     let fits = Fits::of(looming, &measured);
@@ -119,19 +153,15 @@ fn measuring_cells(
     cells: &[usize],
     keep: impl Fn(usize) -> bool,
 ) -> Vec<usize> {
-    let facing: Vec<usize> = cells
-        .iter()
-        .copied()
-        .filter(|&c| measures_approach(looming, c, MIN_FACING_COS) && keep(c))
-        .collect();
+    let passing = |min_cos: f32| {
+        let passes = |&c: &usize| measures_approach(looming, c, min_cos) && keep(c);
+        collect_bounded(cells.len(), cells.iter().copied().filter(passes))
+    };
+    let facing = passing(MIN_FACING_COS);
     if facing.len() >= MIN_MEASURED_CELLS {
         return facing;
     }
-    cells
-        .iter()
-        .copied()
-        .filter(|&c| measures_approach(looming, c, MIN_SIDE_ON_COS) && keep(c))
-        .collect()
+    passing(MIN_SIDE_ON_COS)
 }
 
 /// What an object's measured cells give (value, standard error each).
@@ -159,8 +189,9 @@ impl Fits {
             .map(|(d, se)| (d, se.hypot(ego_sigma.unwrap_or(0.0))));
         let moving = disagreement
             .is_some_and(|(d, se)| d.abs() > (MOVING_SIGMAS * se).max(MOVING_MIN_PER_S));
+        // (The ego prediction's error is the one just taken.)
         let ego = (!moving)
-            .then(|| ego_prediction(looming, measured))
+            .then(|| ego_prediction_with_sigma(looming, measured, ego_sigma))
             .flatten();
         let measured = match (lidar, ego) {
             (Some(lidar), Some(ego)) => Some(inverse_variance_mean(lidar, ego)),
@@ -230,7 +261,17 @@ pub(super) fn keep_cells_seen_before(
 /// The ego prediction's weighted median over `cells` and its error (that
 /// of the motion included); `None` without ego motion.
 fn ego_prediction(looming: &PairLooming, cells: &[usize]) -> Option<(f64, f64)> {
-    let sigma = ego_prediction_sigma(looming, cells)?;
+    ego_prediction_with_sigma(looming, cells, ego_prediction_sigma(looming, cells))
+}
+
+/// [`ego_prediction`] with the motion's error over `cells`
+/// ([`ego_prediction_sigma`]) already taken.
+fn ego_prediction_with_sigma(
+    looming: &PairLooming,
+    cells: &[usize],
+    sigma: Option<f64>,
+) -> Option<(f64, f64)> {
+    let sigma = sigma?;
     robust_mean(cells, &looming.l_ray_ego, &looming.sigma_per_s).map(|(e, se)| (e, se.hypot(sigma)))
 }
 
@@ -312,11 +353,11 @@ fn looming_if_static(
 /// `L_ray_ego` noise (the estimated motion's share is common to all of them,
 /// so it does not average out).
 fn ego_prediction_sigma(looming: &PairLooming, cells: &[usize]) -> Option<f64> {
-    let mut sigmas: Vec<f32> = cells
+    let sigmas = cells
         .iter()
         .map(|&c| looming.ray_ego_sigma_per_s[c])
-        .filter(|s| s.is_finite())
-        .collect();
+        .filter(|s| s.is_finite());
+    let mut sigmas = collect_bounded(cells.len(), sigmas);
     if sigmas.is_empty() {
         return None;
     }
@@ -348,26 +389,24 @@ fn measures_approach(looming: &PairLooming, cell: usize, min_cos: f32) -> bool {
 /// Inverse-variance weighted median of `values` over `cells`, and its
 /// standard error; `None` with fewer than [`MIN_MEASURED_CELLS`] cells.
 fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, f64)> {
-    let mut weighted: Vec<(f64, f64)> = cells
-        .iter()
-        .filter(|&&c| values[c].is_finite())
-        .map(|&c| {
-            let sigma = f64::from(sigmas[c]).max(1e-3);
-            (f64::from(values[c]), 1.0 / (sigma * sigma))
-        })
-        .collect();
+    let weighted = cells.iter().filter(|&&c| values[c].is_finite()).map(|&c| {
+        let sigma = f64::from(sigmas[c]).max(1e-3);
+        (f64::from(values[c]), 1.0 / (sigma * sigma))
+    });
+    let mut weighted = collect_bounded(cells.len(), weighted);
     if weighted.len() < MIN_MEASURED_CELLS {
         return None;
     }
     let centre = weighted_median(&mut weighted);
-    let mut deviations: Vec<(f64, f64)> = weighted
-        .iter()
-        .map(|&(v, w)| ((v - centre).abs(), w))
-        .collect();
-    let mad = weighted_median(&mut deviations);
     let (sum_w, sum_w2) = weighted
         .iter()
         .fold((0.0, 0.0), |(s, s2), &(_, w)| (s + w, s2 + w * w));
+    // The deviations from the centre in place of the values, in the order
+    // the weights were summed in (no second list).
+    for value in &mut weighted {
+        value.0 = (value.0 - centre).abs();
+    }
+    let mad = weighted_median(&mut weighted);
     let effective = sum_w * sum_w / sum_w2;
     // The spread of the cells, and at least the engine's own noise.
     let noise = (1.0 / sum_w).sqrt();

@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::engine::PairLooming;
 use crate::model::Scan;
+use ground::CellPoints;
 
 /// No object (in [`PairObjects::cell_object`]).
 pub const NO_OBJECT: u32 = u32::MAX;
@@ -115,18 +116,67 @@ pub struct Object {
     pub velocity_mps: Option<[f64; 3]>,
 }
 
-/// The cells of each object (`count` of them), by index in
-/// `PairObjects::objects`, from the per-cell labels.
-pub(crate) fn cells_by_object(cell_object: &[u32], count: usize) -> Vec<Vec<usize>> {
-    let mut cells = vec![Vec::new(); count];
-    for (cell, &object) in cell_object.iter().enumerate() {
-        if object != NO_OBJECT
-            && let Some(list) = cells.get_mut(object as usize)
-        {
-            list.push(cell);
+/// The cells of every object, by index in `PairObjects::objects`: one list,
+/// each object's cells ascending and the objects one after another, counted
+/// out of the per-cell labels in two passes. Built once per pair and read by
+/// measuring, tracking and fusing (a list per object, grown by pushes and
+/// built for each of the three, was a twentieth of the stage).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ObjectCells {
+    /// Object `o`'s cells are `cells[starts[o]..starts[o + 1]]`.
+    starts: Vec<usize>,
+    cells: Vec<usize>,
+}
+
+impl ObjectCells {
+    /// The cells of the objects `0..count` labelled in `cell_object` (other
+    /// labels, [`NO_OBJECT`] among them, are no object's).
+    pub(crate) fn of(cell_object: &[u32], count: usize) -> Self {
+        let object_of = |label: u32| Some(label as usize).filter(|&o| o < count);
+        let mut starts = vec![0usize; count + 1];
+        for &label in cell_object {
+            if let Some(object) = object_of(label) {
+                starts[object + 1] += 1;
+            }
         }
+        for object in 0..count {
+            starts[object + 1] += starts[object];
+        }
+        let mut cells = vec![0usize; starts[count]];
+        let mut next = starts[..count].to_vec();
+        for (cell, &label) in cell_object.iter().enumerate() {
+            if let Some(object) = object_of(label) {
+                cells[next[object]] = cell;
+                next[object] += 1;
+            }
+        }
+        Self { starts, cells }
     }
-    cells
+
+    /// The cells of object `object`; `None` past the last object.
+    pub(crate) fn get(&self, object: usize) -> Option<&[usize]> {
+        let (&start, &end) = (self.starts.get(object)?, self.starts.get(object + 1)?);
+        self.cells.get(start..end)
+    }
+
+    /// How many objects.
+    pub(crate) fn len(&self) -> usize {
+        self.starts.len().saturating_sub(1)
+    }
+
+    /// Each object's cells, in order of index.
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &[usize]> {
+        self.starts.windows(2).map(|w| &self.cells[w[0]..w[1]])
+    }
+}
+
+/// `items` collected into a vector of `capacity`, an upper bound on their
+/// count (a filter's `collect` starts small and grows by doubling, copying
+/// what it holds each time).
+pub(crate) fn collect_bounded<T>(capacity: usize, items: impl Iterator<Item = T>) -> Vec<T> {
+    let mut collected = Vec::with_capacity(capacity);
+    collected.extend(items);
+    collected
 }
 
 /// The objects of one pair.
@@ -145,21 +195,32 @@ impl PairObjects {
     /// Find and measure the objects of a pair (ids not yet given: see
     /// [`ObjectTracker::update`]).
     pub fn find(scan: &Scan, looming: &PairLooming, config: &ObjectConfig) -> Self {
-        let points = ground::CellPoints::of(looming, scan);
-        let ground = ground::GroundFit::find_in(looming, &points);
-        let cell_object = segment(&points, looming, ground.as_ref(), config);
-        let objects = measure_objects(scan, looming, &cell_object);
-        Self {
+        Self::find_in(&CellPoints::of(looming, scan), looming, config).0
+    }
+
+    /// [`PairObjects::find`] from the pair's cell returns, and the cells of
+    /// each object.
+    fn find_in(
+        points: &CellPoints,
+        looming: &PairLooming,
+        config: &ObjectConfig,
+    ) -> (Self, ObjectCells) {
+        let ground = ground::GroundFit::find_in(looming, points);
+        let cell_object = segment(points, looming, ground.as_ref(), config);
+        let (objects, cells) = measure::measure_labelled(points, looming, &cell_object);
+        let found = Self {
             ground,
             cell_object,
             objects,
-        }
+        };
+        (found, cells)
     }
 
     /// The objects stage as `process` runs it on a pair: find the objects,
     /// give them their ids and velocities (`tracker`, `dt_s` after the pair
     /// it saw last), and feed their looming back into `looming`'s cells
-    /// ([`fuse_objects`]).
+    /// ([`fuse_objects`]). The cells' returns and each object's cells are
+    /// gathered once for the three.
     pub fn find_tracked_fused(
         scan: &Scan,
         looming: &mut PairLooming,
@@ -167,9 +228,10 @@ impl PairObjects {
         tracker: &mut ObjectTracker,
         dt_s: f64,
     ) -> (Self, FusionCounts) {
-        let mut objects = Self::find(scan, looming, config);
-        tracker.update(&mut objects, looming, dt_s);
-        let counts = fuse_objects(looming, scan, &objects, threat_ttc_s);
+        let points = CellPoints::of(looming, scan);
+        let (mut objects, cells) = Self::find_in(&points, looming, config);
+        tracker.update_with_cells(&mut objects, &cells, looming, dt_s);
+        let counts = fuse::fuse_with_cells(looming, &points, &objects, &cells, threat_ttc_s);
         (objects, counts)
     }
 

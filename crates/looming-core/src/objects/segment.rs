@@ -42,16 +42,18 @@ pub fn segment(
                 .expect("queued cells have a point")
                 .map(f64::from);
             for (neighbour, between) in neighbours(cell, rows, cols) {
+                // A neighbour already searched first: a cell joins one group
+                // (half the neighbours are the cells they were reached from).
+                if visited[neighbour] {
+                    continue;
+                }
                 let Some(there) = points[neighbour].map(|p| p.map(f64::from)) else {
                     continue;
                 };
                 // Two columns away only across a dropout, never across
                 // another return (a pole before a wall).
                 let across_a_return = between.is_some_and(|b| points[b].is_some());
-                if !visited[neighbour]
-                    && !across_a_return
-                    && joined(&here, &there, min_sin_beta, config)
-                {
+                if !across_a_return && joined(&here, &there, min_sin_beta, config) {
                     visited[neighbour] = true;
                     queue.push_back(neighbour);
                 }

@@ -8,7 +8,7 @@
 //! match survives [`MAX_MISSED_PAIRS`] pairs.
 
 use super::measure::keep_cells_seen_before;
-use super::{Object, PairObjects, cells_by_object};
+use super::{Object, ObjectCells, PairObjects};
 use crate::engine::PairLooming;
 
 /// Pairs a track survives without a match.
@@ -57,6 +57,18 @@ impl ObjectTracker {
     /// Give `objects` (of the pair `looming`, `dt_s` after the previous pair
     /// given) their ids and ages.
     pub fn update(&mut self, objects: &mut PairObjects, looming: &PairLooming, dt_s: f64) {
+        let cells = ObjectCells::of(&objects.cell_object, objects.objects.len());
+        self.update_with_cells(objects, &cells, looming, dt_s);
+    }
+
+    /// [`ObjectTracker::update`] with the cells of each object gathered.
+    pub(super) fn update_with_cells(
+        &mut self,
+        objects: &mut PairObjects,
+        cells: &ObjectCells,
+        looming: &PairLooming,
+        dt_s: f64,
+    ) {
         let ego_v = looming.velocity_mps.unwrap_or([0.0; 3]);
         let ego_w = looming.angular_velocity_radps.unwrap_or([0.0; 3]);
         let predicted: Vec<[f64; 3]> = self
@@ -83,7 +95,6 @@ impl ObjectTracker {
                 track_taken[t] = true;
             }
         }
-        let cells = cells_by_object(&objects.cell_object, objects.objects.len());
         let mut next_tracks = Vec::new();
         for (o, object) in objects.objects.iter_mut().enumerate() {
             if let Some(t) = object_track[o] {
@@ -99,7 +110,8 @@ impl ObjectTracker {
                     widened(range_span(object), motion, since_s),
                 ];
                 let still = !track.moving;
-                if !keep_cells_seen_before(object, looming, &cells[o], (spans_m, still)) {
+                let cells = cells.get(o).unwrap_or(&[]);
+                if !keep_cells_seen_before(object, looming, cells, (spans_m, still)) {
                     looming_from_range(object, track.nearest_range_m, since_s);
                 }
             }
