@@ -3,7 +3,7 @@
 use nalgebra::Matrix3;
 
 use super::plane::{eigenvalues_below, fit_plane, scatter, symmetric_eigenvalues};
-use super::window::{fit_gated_points, fit_whole_window, fit_window, gated_window, too_narrow};
+use super::window::{Gather, fit_gated_points, fit_whole_window, fit_window, gated_window, too_narrow};
 use super::*;
 
 #[test]
@@ -156,15 +156,13 @@ fn whole_window_fits_match_fits_point_by_point() {
     for cell in 0..rows * cols {
         for window in [(1, 2), (2, 4)] {
             let center = returns.point(cell).unwrap();
-            let by_points = fit_gated_points(
-                &returns,
-                &geometry,
+            let gather = Gather {
                 cell,
-                &center,
-                params,
                 window,
-                &mut scratch,
-            );
+                within_gate: false,
+            };
+            let by_points =
+                fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
             let gated = gated_window(&returns, &geometry, cell, window).unwrap();
             let Some((fit, spread)) = fit_whole_window(&returns, cols, &center, params, &gated)
             else {
