@@ -164,14 +164,15 @@ fn whole_window_fits_match_fits_point_by_point() {
             let by_points =
                 fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
             let gated = gated_window(&returns, &geometry, cell, window).unwrap();
-            let Some((fit, spread)) = fit_whole_window(&returns, cols, &center, params, &gated)
-            else {
+            let (fit, spread) = fit_whole_window(&returns, cols, &center, params, &gated)
+                .expect("a plane");
+            assert_eq!(fit.edge, by_points.0.edge, "cell {cell} {window:?}: edge");
+            assert_eq!(fit.support, by_points.0.support, "cell {cell} {window:?}");
+            if fit.edge {
                 off += 1;
-                assert!(by_points.0.edge, "cell {cell} {window:?}: an edge");
-                continue;
-            };
-            whole += 1;
-            assert!(!by_points.0.edge, "cell {cell} {window:?}: no edge");
+            } else {
+                whole += 1;
+            }
             assert!((fit.range_m - by_points.0.range_m).abs() < 1e-5);
             assert!((spread.unwrap() - by_points.1.unwrap()).abs() < 1e-6);
             let dot: f32 = (0..3).map(|k| fit.normal[k] * by_points.0.normal[k]).sum();
