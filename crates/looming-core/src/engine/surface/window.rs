@@ -31,9 +31,11 @@ pub(super) fn fit_window(
         return (EMPTY, None);
     };
     let within_gate = gated.is_some();
-    gated
-        .and_then(|gated| fit_whole_window(returns, geometry.cols, &center, params, gated))
-        .unwrap_or_else(|| {
+    let by_moments = match gated {
+        Some(gated) => fit_whole_window(returns, geometry.cols, &center, params, gated),
+        None => fit_beyond_gate(returns, geometry, cell, &center, params, window),
+    };
+    by_moments.unwrap_or_else(|| {
             let points = Gather {
                 cell,
                 window,
@@ -221,11 +223,7 @@ pub(super) fn fit_whole_window(
     }
     // An edge: a return of the window off the plane (`fit_gated_points`).
     let rest = moments.minus(&off);
-    let plane = rest
-        .scatter()
-        .filter(|_| rest.count >= 4.0)
-        .and_then(|(centroid, covariance)| plane_of_scatter(rest.count, centroid, &covariance));
-    Some(match plane {
+    Some(match plane_of_moments(&rest) {
         Some(plane) => on_plane(center, &plane, rest.count, true, tolerance),
         None => (
             CellSurface {
@@ -235,6 +233,79 @@ pub(super) fn fit_whole_window(
             None,
         ),
     })
+}
+
+/// [`fit_window`]'s fit of a window with returns beyond the cell's range
+/// gate, from moments as [`fit_whole_window`]'s: the window's less those
+/// of the returns beyond the gate, less those of the rest off their plane
+/// (the same fits as [`fit_gated_points`]', to the rounding, which
+/// gathered the window's returns and summed them twice over). None where
+/// the window is wider than the image.
+pub(super) fn fit_beyond_gate(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    center: &Vector3<f64>,
+    params: SurfaceParams,
+    (half_rows, half_cols): (usize, usize),
+) -> Option<(CellSurface, Option<f64>)> {
+    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
+    let rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
+    let total = returns.sums.window_over_rows(rows.clone(), col, half_cols)?;
+    let range_m = center.norm();
+    let gate_m = range_gate_m(range_m);
+    // A NaN range (an empty cell) is not beyond the gate: its moments are none.
+    let beyond = |range: f64| (range - range_m).abs() > gate_m;
+    let each_return = |visit: &mut dyn FnMut(f64, &Vector3<f64>)| {
+        for r in rows.clone() {
+            for span in window_cells(r * cols, col, half_cols, cols) {
+                for (&range, p) in returns.ranges[span.clone()].iter().zip(&returns.points[span]) {
+                    visit(range, p);
+                }
+            }
+        }
+    };
+    let mut far = Moments::default();
+    each_return(&mut |range, p| {
+        if beyond(range) {
+            far = far.plus(&Moments::of_point(p));
+        }
+    });
+    // An edge: a return beyond the gate (`fit_gated_points`; there is one
+    // unless `gated_window` did not hold the window's width).
+    let edge = far.count > 0.0;
+    let raw = (
+        CellSurface {
+            edge,
+            ..raw_surface(center)
+        },
+        None,
+    );
+    let tolerance = plane_tolerance_m(params, range_m);
+    let near = total.minus(&far);
+    let Some(plane) = plane_of_moments(&near) else {
+        return Some(raw);
+    };
+    let mut off = Moments::default();
+    each_return(&mut |range, p| {
+        if !beyond(range) && (p - plane.centroid).dot(&plane.normal).abs() > tolerance {
+            off = off.plus(&Moments::of_point(p));
+        }
+    });
+    if off.count == 0.0 {
+        return Some(on_plane(center, &plane, near.count, edge, tolerance));
+    }
+    let rest = near.minus(&off);
+    Some(match plane_of_moments(&rest) {
+        Some(plane) => on_plane(center, &plane, rest.count, true, tolerance),
+        None => (CellSurface { edge: true, ..raw.0 }, None),
+    })
+}
+
+/// The plane of the returns with `moments`, at least four of them.
+fn plane_of_moments(moments: &Moments) -> Option<Plane> {
+    let (centroid, covariance) = moments.scatter().filter(|_| moments.count >= 4.0)?;
+    plane_of_scatter(moments.count, centroid, &covariance)
 }
 
 /// The surface of the return `center` on `plane`, fitted to `count`
