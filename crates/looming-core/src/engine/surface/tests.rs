@@ -3,7 +3,10 @@
 use nalgebra::Matrix3;
 
 use super::plane::{eigenvalues_below, fit_plane, scatter, symmetric_eigenvalues};
-use super::window::{Gather, fit_beyond_gate, fit_gated_points, fit_whole_window, fit_window, gated_window, too_narrow};
+use super::window::{
+    Gather, fit_beyond_gate, fit_gated_points, fit_whole_window, fit_window, gated_window,
+    too_narrow,
+};
 use super::*;
 
 #[test]
@@ -164,8 +167,8 @@ fn whole_window_fits_match_fits_point_by_point() {
             let by_points =
                 fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
             let gated = gated_window(&returns, &geometry, cell, window).unwrap();
-            let (fit, spread) = fit_whole_window(&returns, cols, &center, params, &gated)
-                .expect("a plane");
+            let (fit, spread) =
+                fit_whole_window(&returns, cols, &center, params, &gated).expect("a plane");
             assert_eq!(fit.edge, by_points.0.edge, "cell {cell} {window:?}: edge");
             assert_eq!(fit.support, by_points.0.support, "cell {cell} {window:?}");
             if fit.edge {
@@ -212,9 +215,8 @@ fn fits_beyond_the_gate_match_fits_point_by_point() {
             };
             let (by_points, points_spread) =
                 fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
-            let (fit, spread) =
-                fit_beyond_gate(&returns, &geometry, cell, &center, params, window)
-                    .expect("within the image");
+            let (fit, spread) = fit_beyond_gate(&returns, &geometry, cell, &center, params, window)
+                .expect("within the image");
             let at = format!("cell {cell} {window:?}");
             assert_eq!(fit.edge, by_points.edge, "{at}: edge");
             assert_eq!(fit.support, by_points.support, "{at}: support");

@@ -36,13 +36,13 @@ pub(super) fn fit_window(
         None => fit_beyond_gate(returns, geometry, cell, &center, params, window),
     };
     by_moments.unwrap_or_else(|| {
-            let points = Gather {
-                cell,
-                window,
-                within_gate,
-            };
-            fit_gated_points(returns, geometry, &center, params, points, scratch)
-        })
+        let points = Gather {
+            cell,
+            window,
+            within_gate,
+        };
+        fit_gated_points(returns, geometry, &center, params, points, scratch)
+    })
 }
 
 /// Which returns [`fit_gated_points`] fits: those of the cell's window
@@ -251,7 +251,9 @@ pub(super) fn fit_beyond_gate(
 ) -> Option<(CellSurface, Option<f64>)> {
     let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
     let rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
-    let total = returns.sums.window_over_rows(rows.clone(), col, half_cols)?;
+    let total = returns
+        .sums
+        .window_over_rows(rows.clone(), col, half_cols)?;
     let range_m = center.norm();
     let gate_m = range_gate_m(range_m);
     // A NaN range (an empty cell) is not beyond the gate: its moments are none.
@@ -259,7 +261,10 @@ pub(super) fn fit_beyond_gate(
     let each_return = |visit: &mut dyn FnMut(f64, &Vector3<f64>)| {
         for r in rows.clone() {
             for span in window_cells(r * cols, col, half_cols, cols) {
-                for (&range, p) in returns.ranges[span.clone()].iter().zip(&returns.points[span]) {
+                for (&range, p) in returns.ranges[span.clone()]
+                    .iter()
+                    .zip(&returns.points[span])
+                {
                     visit(range, p);
                 }
             }
@@ -298,7 +303,13 @@ pub(super) fn fit_beyond_gate(
     let rest = near.minus(&off);
     Some(match plane_of_moments(&rest) {
         Some(plane) => on_plane(center, &plane, rest.count, true, tolerance),
-        None => (CellSurface { edge: true, ..raw.0 }, None),
+        None => (
+            CellSurface {
+                edge: true,
+                ..raw.0
+            },
+            None,
+        ),
     })
 }
 
