@@ -22,7 +22,7 @@ pub(super) struct Moments {
 }
 
 impl Moments {
-    fn of_point(p: &Vector3<f64>) -> Self {
+    pub fn of_point(p: &Vector3<f64>) -> Self {
         Self {
             count: 1.0,
             sum: [p.x, p.y, p.z],
@@ -49,7 +49,7 @@ impl Moments {
         out
     }
 
-    fn minus(&self, other: &Self) -> Self {
+    pub fn minus(&self, other: &Self) -> Self {
         let mut out = *self;
         out.count -= other.count;
         for (a, b) in out.sum.iter_mut().zip(&other.sum) {

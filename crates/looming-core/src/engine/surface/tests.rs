@@ -3,7 +3,10 @@
 use nalgebra::Matrix3;
 
 use super::plane::{eigenvalues_below, fit_plane, scatter, symmetric_eigenvalues};
-use super::window::{fit_gated_points, fit_whole_window, fit_window, gated_window, too_narrow};
+use super::window::{
+    Gather, fit_beyond_gate, fit_gated_points, fit_whole_window, fit_window, gated_window,
+    too_narrow,
+};
 use super::*;
 
 #[test]
@@ -156,24 +159,23 @@ fn whole_window_fits_match_fits_point_by_point() {
     for cell in 0..rows * cols {
         for window in [(1, 2), (2, 4)] {
             let center = returns.point(cell).unwrap();
-            let by_points = fit_gated_points(
-                &returns,
-                &geometry,
+            let gather = Gather {
                 cell,
-                &center,
-                params,
                 window,
-                &mut scratch,
-            );
-            let gated = gated_window(&returns, &geometry, cell, window).unwrap();
-            let Some((fit, spread)) = fit_whole_window(&returns, cols, &center, params, &gated)
-            else {
-                off += 1;
-                assert!(by_points.0.edge, "cell {cell} {window:?}: an edge");
-                continue;
+                within_gate: false,
             };
-            whole += 1;
-            assert!(!by_points.0.edge, "cell {cell} {window:?}: no edge");
+            let by_points =
+                fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
+            let gated = gated_window(&returns, &geometry, cell, window).unwrap();
+            let (fit, spread) =
+                fit_whole_window(&returns, cols, &center, params, &gated).expect("a plane");
+            assert_eq!(fit.edge, by_points.0.edge, "cell {cell} {window:?}: edge");
+            assert_eq!(fit.support, by_points.0.support, "cell {cell} {window:?}");
+            if fit.edge {
+                off += 1;
+            } else {
+                whole += 1;
+            }
             assert!((fit.range_m - by_points.0.range_m).abs() < 1e-5);
             assert!((spread.unwrap() - by_points.1.unwrap()).abs() < 1e-6);
             let dot: f32 = (0..3).map(|k| fit.normal[k] * by_points.0.normal[k]).sum();
@@ -184,6 +186,50 @@ fn whole_window_fits_match_fits_point_by_point() {
         whole > 0 && off > 0,
         "{whole} whole windows, {off} off the plane"
     );
+}
+
+#[test]
+fn fits_beyond_the_gate_match_fits_point_by_point() {
+    let (rows, cols) = (5, 24);
+    let (geometry, params, image) = dense_image(rows, cols, 0.002);
+    // A noisy plane with a return off it, and a column of returns far
+    // behind it (beyond the range gate of the cells about it).
+    let mut points = noisy_plane(rows, cols, 0.03, 0.2);
+    for row in 0..rows {
+        points[row * cols + 9] *= 3.0;
+    }
+    let returns = Returns::of_points(&image, points, cols, &[2, 4]);
+    let mut scratch = Scratch::default();
+    let mut beyond = 0;
+    for cell in 0..rows * cols {
+        for window in [(1, 2), (2, 4)] {
+            if gated_window(&returns, &geometry, cell, window).is_some() {
+                continue;
+            }
+            beyond += 1;
+            let center = returns.point(cell).unwrap();
+            let gather = Gather {
+                cell,
+                window,
+                within_gate: false,
+            };
+            let (by_points, points_spread) =
+                fit_gated_points(&returns, &geometry, &center, params, gather, &mut scratch);
+            let (fit, spread) = fit_beyond_gate(&returns, &geometry, cell, &center, params, window)
+                .expect("within the image");
+            let at = format!("cell {cell} {window:?}");
+            assert_eq!(fit.edge, by_points.edge, "{at}: edge");
+            assert_eq!(fit.support, by_points.support, "{at}: support");
+            assert_eq!(spread.is_some(), points_spread.is_some(), "{at}: a plane");
+            assert!((fit.range_m - by_points.range_m).abs() < 1e-5, "{at}");
+            if let (Some(a), Some(b)) = (spread, points_spread) {
+                assert!((a - b).abs() < 1e-6, "{at}: spread");
+                let dot: f32 = (0..3).map(|k| fit.normal[k] * by_points.normal[k]).sum();
+                assert!(dot > 1.0 - 1e-6, "{at}: normals {dot}");
+            }
+        }
+    }
+    assert!(beyond > 0);
 }
 
 #[test]
