@@ -4,8 +4,9 @@
 //! exact on planar surfaces, so the static road does not light up from
 //! discretisation; z-buffered, so the nearest surface wins.
 //!
-//! Here the render and its z-buffer; the vertices moved column by column
-//! in `moved_column.rs` (the transform cache and the turns in
+//! Here the render and its z-buffer; the source's fields column-major,
+//! once per pair, in `source_columns.rs`; the vertices moved column by
+//! column in `moved_column.rs` (the transform cache and the turns in
 //! `moved_vertices.rs`), the mesh's joins and bridged dropouts in `mesh.rs`,
 //! the rasterisation in `raster.rs` (its common case in `full_quad.rs`).
 
