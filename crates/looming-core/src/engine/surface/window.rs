@@ -222,17 +222,7 @@ pub(super) fn fit_whole_window(
         return Some(on_plane(center, &plane, moments.count, false, tolerance));
     }
     // An edge: a return of the window off the plane (`fit_gated_points`).
-    let rest = moments.minus(&off);
-    Some(match plane_of_moments(&rest) {
-        Some(plane) => on_plane(center, &plane, rest.count, true, tolerance),
-        None => (
-            CellSurface {
-                edge: true,
-                ..raw_surface(center)
-            },
-            None,
-        ),
-    })
+    Some(without_off_plane(center, &moments.minus(&off), tolerance))
 }
 
 /// [`fit_window`]'s fit of a window with returns beyond the cell's range
@@ -300,17 +290,27 @@ pub(super) fn fit_beyond_gate(
     if off.count == 0.0 {
         return Some(on_plane(center, &plane, near.count, edge, tolerance));
     }
-    let rest = near.minus(&off);
-    Some(match plane_of_moments(&rest) {
+    Some(without_off_plane(center, &near.minus(&off), tolerance))
+}
+
+/// The surface of the return `center` on the plane of `rest`, the moments
+/// left once the returns off a first plane are taken out (an edge); its
+/// raw range where they make no plane.
+fn without_off_plane(
+    center: &Vector3<f64>,
+    rest: &Moments,
+    tolerance: f64,
+) -> (CellSurface, Option<f64>) {
+    match plane_of_moments(rest) {
         Some(plane) => on_plane(center, &plane, rest.count, true, tolerance),
         None => (
             CellSurface {
                 edge: true,
-                ..raw.0
+                ..raw_surface(center)
             },
             None,
         ),
-    })
+    }
 }
 
 /// The plane of the returns with `moments`, at least four of them.
