@@ -197,9 +197,13 @@ impl Surfaces {
                     .zip(direction)
                     .zip(range_m)
                 {
-                    if range_m.is_finite() {
-                        (*azimuth, *elevation) = super::grid::angles(direction);
-                    }
+                    // Every cell's angles, an empty one's then replaced by
+                    // NaN, not a branch per cell: straight-line, the loop
+                    // takes two cells at a time.
+                    let (a, e) = super::grid::angles(direction);
+                    let finite = range_m.is_finite();
+                    *azimuth = if finite { a } else { f64::NAN };
+                    *elevation = if finite { e } else { f64::NAN };
                 }
             });
     }

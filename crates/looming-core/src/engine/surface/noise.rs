@@ -4,9 +4,13 @@
 
 use rayon::prelude::*;
 
-use super::window::{fit_window, gated_window};
-use super::{Returns, Scratch, SurfaceParams};
+use nalgebra::Vector3;
+
+use super::plane::{Plane, plane_of_scatter};
+use super::window::{WHOLE_WINDOW_MARGIN, fit_window, gated_window};
+use super::{Returns, Scratch, SurfaceParams, plane_tolerance_m, range_gate_m};
 use crate::engine::grid::{ImageGeometry, RangeImage};
+use crate::engine::window_sums::column_spans;
 
 /// Range noise of each row, metres: from the second differences of the raw
 /// ranges along the row (three consecutive returns of one laser on one
@@ -15,23 +19,23 @@ use crate::engine::grid::{ImageGeometry, RangeImage};
 /// differ (per-laser noise and intensity-dependent error); a row with too
 /// few samples takes `default_m`. Clamped to [0.005, 0.1] m.
 pub(super) fn row_noise(image: &RangeImage, geometry: &ImageGeometry, default_m: f64) -> Vec<f32> {
+    // One buffer for every row's differences (a row's own was an
+    // allocation per row per scan).
+    let mut second: Vec<f32> = Vec::with_capacity(geometry.cols);
     (0..geometry.rows)
         .map(|row| {
             let ranges = &image.range_m[row * geometry.cols..(row + 1) * geometry.cols];
-            let mut second: Vec<f32> = ranges
-                .windows(3)
-                .filter_map(|w| {
-                    let (a, b, c) = (w[0], w[1], w[2]);
-                    let smooth = (a - b).abs() < 0.05 * b && (c - b).abs() < 0.05 * b;
-                    (a.is_finite() && b.is_finite() && c.is_finite() && smooth)
-                        .then(|| (a - 2.0 * b + c).abs())
-                })
-                .collect();
+            second.clear();
+            second.extend(ranges.windows(3).filter_map(|w| {
+                let (a, b, c) = (w[0], w[1], w[2]);
+                let smooth = (a - b).abs() < 0.05 * b && (c - b).abs() < 0.05 * b;
+                (a.is_finite() && b.is_finite() && c.is_finite() && smooth)
+                    .then(|| (a - 2.0 * b + c).abs())
+            }));
             if second.len() < MIN_NOISE_SAMPLES {
                 return default_m as f32;
             }
-            let mid = second.len() / 2;
-            let median = *second.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let median = median_f32(&mut second);
             (1.4826 * median / 6f32.sqrt()).clamp(0.005, 0.1)
         })
         .collect()
@@ -58,32 +62,21 @@ pub(super) fn noise_per_row(
     };
     let scatter: Vec<f32> = (0..geometry.rows)
         .into_par_iter()
-        .map_init(Scratch::default, |scratch, row| {
-            let mut residuals: Vec<f32> = (0..geometry.cols)
-                .step_by(NOISE_STRIDE)
-                .filter_map(|col| {
-                    let (cell, window) = (row * geometry.cols + col, (1, params.half_cols));
-                    let gated = gated_window(returns, geometry, cell, window);
-                    let (fit, _) = fit_window(
-                        returns,
-                        geometry,
-                        cell,
-                        loose,
-                        window,
-                        gated.as_ref(),
-                        scratch,
-                    );
-                    (fit.support >= 6 && !fit.edge && fit.residual_m.is_finite())
-                        .then(|| fit.residual_m.abs())
-                })
-                .collect();
-            if residuals.len() < MIN_NOISE_SAMPLES / 2 {
-                return f32::NAN;
-            }
-            // A return's distance to a plane fitted with it is about 0.9 of
-            // its noise in a window of 15; the median of |N(0, s)| is 0.67 s.
-            1.4826 * median_f32(&mut residuals) / 0.9
-        })
+        .map_init(
+            || (Scratch::default(), Vec::new()),
+            |(scratch, residuals), row| {
+                residuals.clear();
+                residuals.extend((0..geometry.cols).step_by(NOISE_STRIDE).filter_map(|col| {
+                    plane_scatter_m(returns, geometry, row * geometry.cols + col, loose, scratch)
+                }));
+                if residuals.len() < MIN_NOISE_SAMPLES / 2 {
+                    return f32::NAN;
+                }
+                // A return's distance to a plane fitted with it is about 0.9 of
+                // its noise in a window of 15; the median of |N(0, s)| is 0.67 s.
+                1.4826 * median_f32(residuals) / 0.9
+            },
+        )
         .collect();
     along
         .iter()
@@ -96,6 +89,128 @@ pub(super) fn noise_per_row(
             }
         })
         .collect()
+}
+
+/// The distance of `cell`'s return to the plane of its window of one beam
+/// either side (`loose.half_cols` columns), for [`noise_per_row`]: where
+/// [`fit_window`] with the `loose` gate would give a plane of at least
+/// [`MIN_SCATTER_SUPPORT`] returns with no edge (no return beyond the
+/// range gate or off the plane), the same |residual| to the bit; None where
+/// it would not. Only the window's gate, moments and plane: not the
+/// denoised range, direction and normal facing the sensor that the fit
+/// also makes (a fifth of the noise's time), nor the fit at all where a
+/// return beyond the gate makes an edge. The whole fit where the window
+/// is not from the running sums, or their plane fails (`plane_scatter_by_fit`).
+pub(super) fn plane_scatter_m(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    loose: SurfaceParams,
+    scratch: &mut Scratch,
+) -> Option<f32> {
+    // `ranges` is NaN exactly where the cell is empty: no fit.
+    let range_m = returns.ranges[cell];
+    if range_m.is_nan() {
+        return None;
+    }
+    let (row, col, half_cols) = (cell / geometry.cols, cell % geometry.cols, loose.half_cols);
+    let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
+    // `gated_window`'s gate: a return beyond it is an edge (`fit_beyond_gate`).
+    let gate_m = range_gate_m(range_m);
+    let within =
+        returns
+            .extremes
+            .rows_all(rows.clone(), col, half_cols, |[nearest_m, farthest_m]| {
+                !(range_m - nearest_m > gate_m || farthest_m - range_m > gate_m)
+            });
+    let total = match within {
+        Some(false) => return None,
+        Some(true) => returns.sums.window_over_rows(rows.clone(), col, half_cols),
+        None => None,
+    };
+    let Some(total) = total else {
+        return plane_scatter_by_fit(returns, geometry, cell, loose, scratch);
+    };
+    // Fewer returns: no fit of them has the support (`fit_gated_points`
+    // fits a subset of them).
+    if total.count < MIN_SCATTER_SUPPORT {
+        return None;
+    }
+    let plane = total
+        .scatter()
+        .and_then(|(centroid, covariance)| plane_of_scatter(total.count, centroid, &covariance));
+    let Some(plane) = plane else {
+        return plane_scatter_by_fit(returns, geometry, cell, loose, scratch);
+    };
+    let tolerance = plane_tolerance_m(loose, range_m);
+    if any_off_plane(
+        returns,
+        geometry.cols,
+        (rows, col, half_cols),
+        &plane,
+        tolerance,
+    ) {
+        return None;
+    }
+    // `on_plane`'s residual, its sign (the normal facing the sensor) aside.
+    let residual_m = ((returns.points[cell] - plane.centroid).dot(&plane.normal) as f32).abs();
+    residual_m.is_finite().then_some(residual_m)
+}
+
+/// [`plane_scatter_m`] by the whole fit: the reference it keeps to.
+pub(super) fn plane_scatter_by_fit(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    loose: SurfaceParams,
+    scratch: &mut Scratch,
+) -> Option<f32> {
+    let window = (1, loose.half_cols);
+    let gated = gated_window(returns, geometry, cell, window);
+    let (fit, _) = fit_window(
+        returns,
+        geometry,
+        cell,
+        loose,
+        window,
+        gated.as_ref(),
+        scratch,
+    );
+    (f64::from(fit.support) >= MIN_SCATTER_SUPPORT && !fit.edge && fit.residual_m.is_finite())
+        .then(|| fit.residual_m.abs())
+}
+
+/// Whether a return of the window (`rows`, about `col`, `half_cols` either
+/// side) lies farther than `tolerance` from `plane`: where
+/// `off_plane_moments` finds any, looking at the same rows.
+fn any_off_plane(
+    returns: &Returns,
+    cols: usize,
+    (rows, col, half_cols): (std::ops::RangeInclusive<usize>, usize, usize),
+    plane: &Plane,
+    tolerance: f64,
+) -> bool {
+    let limit = WHOLE_WINDOW_MARGIN * tolerance * tolerance;
+    if plane.smallest <= limit {
+        return false;
+    }
+    let offset = plane.centroid.dot(&plane.normal);
+    // An empty cell's NaN is no distance beyond the tolerance.
+    let is_off = |p: &Vector3<f64>| (p - plane.centroid).dot(&plane.normal).abs() > tolerance;
+    rows.filter(|&r| {
+        let of_row = returns.sums.window(r, col, half_cols);
+        of_row.is_none_or(|moments| moments.squared_distances(&plane.normal, offset) > limit)
+    })
+    .any(|r| {
+        column_spans(col, half_cols, cols)
+            .into_iter()
+            .flatten()
+            .any(|span| {
+                returns.points[r * cols + span.start..r * cols + span.end]
+                    .iter()
+                    .any(is_off)
+            })
+    })
 }
 
 /// The median (upper middle) of `values`, reordering them.
@@ -130,6 +245,9 @@ const ROW_NOISE_OWN: f32 = 1.0 / 3.0;
 const LOOSE_NOISE_M: f64 = 0.05;
 /// Every how many columns the plane scatter is measured.
 const NOISE_STRIDE: usize = 4;
+
+/// Returns the plane of a cell's window needs for its scatter to count.
+const MIN_SCATTER_SUPPORT: f64 = 6.0;
 
 /// Second differences a row needs for its own noise estimate.
 const MIN_NOISE_SAMPLES: usize = 50;

@@ -370,3 +370,46 @@ fn bands_and_tiles_fit_as_cell_by_cell(cols: usize) {
     // Some windows stayed at 3 beams, and the close object's grew.
     assert!(grows[1] > 0 && grows[2] + grows[3] > 0, "{grows:?}");
 }
+
+#[test]
+fn plane_scatter_is_the_whole_fits_residual_to_the_bit() {
+    use super::noise::{plane_scatter_by_fit, plane_scatter_m};
+    // Images with returns off the plane, beyond the range gate (a column
+    // far behind, a close object), empty cells, and too narrow for the
+    // running sums (the window wider than the image: the fit itself).
+    let mut counts = [0usize; 2];
+    for (rows, cols, half_cols) in [(5, 24, 2), (7, 40, 2), (4, 4, 2), (3, 3, 1), (1, 12, 2)] {
+        for (noise_m, off_m) in [(0.002, 0.2), (0.03, 0.5), (0.0, 0.0)] {
+            let (geometry, params, image) = dense_image(rows, cols, noise_m);
+            let mut points = noisy_plane(rows, cols, noise_m, off_m);
+            for (cell, p) in points.iter_mut().enumerate() {
+                let col = cell % cols;
+                if cell % 11 == 4 {
+                    *p = Vector3::repeat(f64::NAN);
+                } else if col == 9 {
+                    *p *= 3.0;
+                } else if (14..17).contains(&col) {
+                    *p *= 0.2;
+                }
+            }
+            let returns = Returns::of_points(&image, points, cols, &[half_cols, 2 * half_cols]);
+            let loose = SurfaceParams {
+                range_noise_m: 0.05,
+                half_cols,
+                ..params
+            };
+            let mut scratch = Scratch::default();
+            for cell in 0..rows * cols {
+                let fast = plane_scatter_m(&returns, &geometry, cell, loose, &mut scratch);
+                let fit = plane_scatter_by_fit(&returns, &geometry, cell, loose, &mut scratch);
+                assert_eq!(
+                    fast.map(f32::to_bits),
+                    fit.map(f32::to_bits),
+                    "{rows} x {cols}, noise {noise_m}, cell {cell}"
+                );
+                counts[usize::from(fit.is_some())] += 1;
+            }
+        }
+    }
+    assert!(counts[0] > 0 && counts[1] > 0, "{counts:?}");
+}

@@ -471,7 +471,7 @@ fn off_plane_moments(
 /// Below this fraction of the squared tolerance, a sum of squared distances
 /// to a plane shows every return in it on the plane without looking (a
 /// margin for the rounding of the running sums).
-const WHOLE_WINDOW_MARGIN: f64 = 0.999;
+pub(super) const WHOLE_WINDOW_MARGIN: f64 = 0.999;
 
 /// The cells of the row starting at cell `row_start` in the window's
 /// columns (`window_sums::column_spans`; empty when wider than the image).

@@ -80,90 +80,99 @@ pub(super) struct Proxies {
 /// property of the scan alone: computed once with its surfaces, read by
 /// every render of it (two per pair, up to eight more to estimate a motion).
 pub(in crate::engine) fn mesh_joins(surfaces: &Surfaces, rows: usize, cols: usize) -> Vec<u8> {
+    let mut joined = vec![0; rows * cols];
+    joined
+        .par_chunks_mut(cols.max(1))
+        .enumerate()
+        .for_each(|(row, joins_of_row)| row_joins(surfaces, row, (rows, cols), joins_of_row));
+    // Each quad's two triangles, from its edges' bits (some in the next row
+    // and column): a render reads one byte per quad instead of five. Into
+    // the table itself, row by row from the edges' table.
     let mut joins = vec![0; rows * cols];
     joins
         .par_chunks_mut(cols.max(1))
         .enumerate()
         .for_each(|(row, joins_of_row)| {
-            let noise_here = f64::from(surfaces.noise_m_per_row[row]);
-            let noise_down = surfaces
-                .noise_m_per_row
-                .get(row + 1)
-                .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
-            let finite = |cell: usize| surfaces.range_m[cell].is_finite();
-            // Each cell's point and normal once per edge it ends, not once
-            // per call (the right neighbour's is the next column's own).
-            let mut at_right = CellPlane::of(surfaces, row * cols);
+            let at = |r: usize| r * cols..(r + 1) * cols;
+            let here = &joined[at(row)];
+            let Some(below) = joined.get(at(row + 1)) else {
+                joins_of_row.copy_from_slice(here);
+                return;
+            };
+            let (edge_here, edge_below) = (&surfaces.edge[at(row)], &surfaces.edge[at(row + 1)]);
             for (col, joins) in joins_of_row.iter_mut().enumerate() {
-                let cell = row * cols + col;
-                let right = row * cols + if col + 1 == cols { 0 } else { col + 1 };
-                let at_here = at_right;
-                at_right = CellPlane::of(surfaces, right);
-                let here = finite(cell);
-                if here
-                    && finite(right)
-                    && planes_on_one(surfaces, (cell, &at_here), (right, &at_right), noise_here)
-                {
-                    *joins |= JOIN_RIGHT;
-                }
-                if row + 1 < rows {
-                    let down = cell + cols;
-                    let at_down = CellPlane::of(surfaces, down);
-                    if here
-                        && finite(down)
-                        && planes_on_one(surfaces, (cell, &at_here), (down, &at_down), noise_down)
-                    {
-                        *joins |= JOIN_DOWN;
-                    }
-                    // The diagonal does not involve this cell: an empty cell's
-                    // neighbours still share the quad's other triangle.
-                    if finite(right)
-                        && finite(down)
-                        && planes_on_one(surfaces, (right, &at_right), (down, &at_down), noise_down)
-                    {
-                        *joins |= JOIN_ANTI;
-                    }
-                }
+                let next = if col + 1 == cols { 0 } else { col + 1 };
+                let (a, b, c) = (here[col], here[next], below[col]);
+                let edge = [
+                    edge_here[col],
+                    edge_here[next],
+                    edge_below[col],
+                    edge_below[next],
+                ];
+                *joins = a | quad_bits([a, b, c], edge);
             }
         });
-    // Each quad's two triangles, from its edges' bits (some in the next row
-    // and column): a render reads one byte per quad instead of five.
-    let mut quads = vec![0; rows * cols];
-    quads
-        .par_chunks_mut(cols.max(1))
-        .enumerate()
-        .for_each(|(row, quads_of_row)| {
-            for (col, quad) in quads_of_row.iter_mut().enumerate() {
-                *quad = quad_bits(surfaces, &joins, (row, col), (rows, cols));
-            }
-        });
-    for (joins, quad) in joins.iter_mut().zip(quads) {
-        *joins |= quad;
-    }
     joins
 }
 
-/// The quad at (`row`, `col`) (cells a there, b right of it, c below it, d below
-/// b): [`QUAD_FIRST`] where its triangle (a, b, c) has all three edges on
-/// one surface, [`QUAD_SECOND`] the same for (b, d, c), [`EDGE_FIRST`] and
-/// [`EDGE_SECOND`] where a vertex of either lies on an occlusion edge.
-fn quad_bits(
+/// One row's edge bits ([`mesh_joins`]'s first three) into `joins_of_row`.
+fn row_joins(
     surfaces: &Surfaces,
-    joins: &[u8],
-    (row, col): (usize, usize),
+    row: usize,
     (rows, cols): (usize, usize),
-) -> u8 {
-    if row + 1 >= rows {
-        return 0;
+    joins_of_row: &mut [u8],
+) {
+    let noise_here = f64::from(surfaces.noise_m_per_row[row]);
+    let noise_down = surfaces
+        .noise_m_per_row
+        .get(row + 1)
+        .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
+    // Each cell's point and normal once per edge it ends, not once
+    // per call (the right neighbour's is the next column's own).
+    let mut at_right = CellPlane::of(surfaces, row * cols);
+    for (col, joins) in joins_of_row.iter_mut().enumerate() {
+        let cell = row * cols + col;
+        let right = row * cols + if col + 1 == cols { 0 } else { col + 1 };
+        let at_here = at_right;
+        at_right = CellPlane::of(surfaces, right);
+        if at_here.finite
+            && at_right.finite
+            && planes_on_one(surfaces, (cell, &at_here), (right, &at_right), noise_here)
+        {
+            *joins |= JOIN_RIGHT;
+        }
+        if row + 1 < rows {
+            let down = cell + cols;
+            let at_down = CellPlane::of(surfaces, down);
+            if at_here.finite
+                && at_down.finite
+                && planes_on_one(surfaces, (cell, &at_here), (down, &at_down), noise_down)
+            {
+                *joins |= JOIN_DOWN;
+            }
+            // The diagonal does not involve this cell: an empty cell's
+            // neighbours still share the quad's other triangle.
+            if at_right.finite
+                && at_down.finite
+                && planes_on_one(surfaces, (right, &at_right), (down, &at_down), noise_down)
+            {
+                *joins |= JOIN_ANTI;
+            }
+        }
     }
-    let a = row * cols + col;
-    let b = row * cols + if col + 1 == cols { 0 } else { col + 1 };
-    let (c, d) = (a + cols, b + cols);
-    let all = |bits: [bool; 3]| bits.iter().all(|&bit| bit);
-    let anti = joins[a] & JOIN_ANTI != 0;
-    let first = all([joins[a] & JOIN_RIGHT != 0, anti, joins[a] & JOIN_DOWN != 0]);
-    let second = all([joins[b] & JOIN_DOWN != 0, joins[c] & JOIN_RIGHT != 0, anti]);
-    let edge = &surfaces.edge;
+}
+
+/// The quad of cells a, b right of it, c below it and d below b, from the
+/// edge bits of a, b and c and whether each of a, b, c, d is on an
+/// occlusion edge: [`QUAD_FIRST`] where its triangle (a, b, c) has all
+/// three edges on one surface, [`QUAD_SECOND`] the same for (b, d, c),
+/// [`EDGE_FIRST`] and [`EDGE_SECOND`] where a vertex of either lies on an
+/// occlusion edge.
+#[inline]
+fn quad_bits([a, b, c]: [u8; 3], [edge_a, edge_b, edge_c, edge_d]: [bool; 4]) -> u8 {
+    let anti = a & JOIN_ANTI != 0;
+    let first = a & JOIN_RIGHT != 0 && anti && a & JOIN_DOWN != 0;
+    let second = b & JOIN_DOWN != 0 && c & JOIN_RIGHT != 0 && anti;
     let mut bits = 0;
     if first {
         bits |= QUAD_FIRST;
@@ -171,10 +180,10 @@ fn quad_bits(
     if second {
         bits |= QUAD_SECOND;
     }
-    if edge[a] || edge[b] || edge[c] {
+    if edge_a || edge_b || edge_c {
         bits |= EDGE_FIRST;
     }
-    if edge[b] || edge[d] || edge[c] {
+    if edge_b || edge_d || edge_c {
         bits |= EDGE_SECOND;
     }
     bits
@@ -226,6 +235,8 @@ struct CellPlane {
     point: Vector3<f64>,
     /// The normal, where the cell has one.
     normal: Option<Vector3<f64>>,
+    /// The cell has a return (a finite range).
+    finite: bool,
 }
 
 impl CellPlane {
@@ -234,10 +245,12 @@ impl CellPlane {
         let d = s.direction[cell];
         let n = s.normal[cell];
         let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
+        let range_m = s.range_m[cell];
         Self {
             point: Vector3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]))
-                * f64::from(s.range_m[cell]),
+                * f64::from(range_m),
             normal: (n.norm_squared() > 0.5).then_some(n),
+            finite: range_m.is_finite(),
         }
     }
 }
@@ -265,6 +278,131 @@ fn planes_on_one(
         _ => {
             let (ra, rb) = (f64::from(s.range_m[a]), f64::from(s.range_m[b]));
             (ra - rb).abs() <= 0.05 * ra.max(rb) + 4.0 * noise_m
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `mesh_joins` as it was: the edges' table, then each quad's bits
+    /// from it in a table of their own, added to it.
+    fn mesh_joins_in_two_tables(surfaces: &Surfaces, rows: usize, cols: usize) -> Vec<u8> {
+        let mut joins = vec![0; rows * cols];
+        for row in 0..rows {
+            let noise_here = f64::from(surfaces.noise_m_per_row[row]);
+            let noise_down = surfaces
+                .noise_m_per_row
+                .get(row + 1)
+                .map_or(noise_here, |&n| noise_here.max(f64::from(n)));
+            let finite = |cell: usize| surfaces.range_m[cell].is_finite();
+            for col in 0..cols {
+                let cell = row * cols + col;
+                let right = row * cols + (col + 1) % cols;
+                if finite(cell) && finite(right) && on_one_plane(surfaces, cell, right, noise_here)
+                {
+                    joins[cell] |= JOIN_RIGHT;
+                }
+                if row + 1 < rows {
+                    let down = cell + cols;
+                    if finite(cell)
+                        && finite(down)
+                        && on_one_plane(surfaces, cell, down, noise_down)
+                    {
+                        joins[cell] |= JOIN_DOWN;
+                    }
+                    if finite(right)
+                        && finite(down)
+                        && on_one_plane(surfaces, right, down, noise_down)
+                    {
+                        joins[cell] |= JOIN_ANTI;
+                    }
+                }
+            }
+        }
+        let mut quads = vec![0; rows * cols];
+        for row in 0..rows.saturating_sub(1) {
+            for col in 0..cols {
+                let a = row * cols + col;
+                let b = row * cols + (col + 1) % cols;
+                let (c, d) = (a + cols, b + cols);
+                let edge = [a, b, c, d].map(|k| surfaces.edge[k]);
+                quads[a] = quad_bits([joins[a], joins[b], joins[c]], edge);
+            }
+        }
+        joins.iter().zip(quads).map(|(j, q)| j | q).collect()
+    }
+
+    #[test]
+    fn the_joins_table_is_as_from_two_tables() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for (rows, cols) in [(1, 5), (2, 1), (6, 17), (9, 64)] {
+            let cells = rows * cols;
+            // Noisy ranges with steps (occlusions), empty cells, and
+            // normals known on most cells.
+            let range_m: Vec<f32> = (0..cells)
+                .map(|k| match k % 13 {
+                    4 => f32::NAN,
+                    7 => 4.0 + uniform() as f32,
+                    _ => 10.0 + 0.05 * uniform() as f32,
+                })
+                .collect();
+            let direction: Vec<[f32; 3]> = (0..cells)
+                .map(|k| {
+                    let (row, col) = ((k / cols) as f64, (k % cols) as f64);
+                    let (azimuth, elevation) = (0.01 * col, 0.02 * row - 0.05);
+                    let e = [
+                        elevation.cos() * azimuth.cos(),
+                        elevation.cos() * azimuth.sin(),
+                        elevation.sin(),
+                    ];
+                    e.map(|x| x as f32)
+                })
+                .collect();
+            let normal: Vec<[f32; 3]> = (0..cells)
+                .map(|k| {
+                    if k % 5 == 2 {
+                        [0.0; 3]
+                    } else {
+                        let tilt = 0.3 * (uniform() - 0.5);
+                        [-(1.0 - tilt * tilt).sqrt() as f32, tilt as f32, 0.0]
+                    }
+                })
+                .collect();
+            let surfaces = Surfaces {
+                range_m,
+                direction,
+                normal,
+                incidence_cos: vec![1.0; cells],
+                support: vec![9; cells],
+                edge: (0..cells).map(|k| k % 7 == 3).collect(),
+                noise_m_per_row: (0..rows).map(|r| 0.01 + 0.004 * r as f32).collect(),
+                range_bias_m_per_row: vec![0.0; rows],
+                joins: Vec::new(),
+                azimuth_rad: vec![0.0; cells],
+                elevation_rad: vec![0.0; cells],
+                cols,
+            };
+            let joins = mesh_joins(&surfaces, rows, cols);
+            assert_eq!(
+                joins,
+                mesh_joins_in_two_tables(&surfaces, rows, cols),
+                "{rows} x {cols}"
+            );
+            if cells > 100 {
+                // Joined and parted neighbours, whole and broken quads.
+                for bit in [JOIN_RIGHT, JOIN_DOWN, JOIN_ANTI, QUAD_FIRST, QUAD_SECOND] {
+                    let joined = joins.iter().filter(|&&j| j & bit != 0).count();
+                    assert!(joined > 0 && joined < cells, "bit {bit}: {joined}");
+                }
+            }
         }
     }
 }
