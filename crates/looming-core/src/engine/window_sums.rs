@@ -156,8 +156,8 @@ impl RowSums {
         if col >= half_cols && col + half_cols < self.cols {
             let stride = self.cols + 1;
             let (from, to) = (col - half_cols, col + half_cols + 1);
-            // Row after row one stride on, counted down (an inclusive
-            // range's iteration and an index product per row cost more).
+            // Row after row, the base a stride on (an inclusive range's
+            // iteration and a product per row cost more).
             let mut base = rows.start() * stride;
             for _ in 0..rows_in(&rows) {
                 let (Some(to), Some(from)) =
