@@ -14,9 +14,17 @@ pub(super) struct RowExtremes {
     /// The half widths held, ascending.
     half_widths: Vec<usize>,
     /// Per row, per half width held, per column: `[smallest, largest]`,
-    /// metres; NaN where the window holds no return.
+    /// metres; [`NONE_HELD`] where the window holds no return.
     extremes: Vec<[f64; 2]>,
 }
+
+/// The extremes of a window holding no return, `[+inf, -inf]`: no range
+/// lies beyond them, so a range gate passes them as it passed the NaN they
+/// replace (a comparison with NaN is false), and the widening takes plain
+/// comparisons (`minpd`/`maxpd`) where `f64::min` and `max`, passing over
+/// NaN, took three instructions each (with the copy `row_extremes` no
+/// longer makes, the extremes' instructions fell by more than half).
+const NONE_HELD: [f64; 2] = [f64::INFINITY, f64::NEG_INFINITY];
 
 impl RowExtremes {
     /// Extremes of `ranges` (one per cell, row-major; NaN for an empty
@@ -44,7 +52,7 @@ impl RowExtremes {
         let per_row = wanted.len() * cols;
         let mut extremes = buffer;
         extremes.clear();
-        extremes.resize(ranges.len() / cols.max(1) * per_row, [f64::NAN; 2]);
+        extremes.resize(ranges.len() / cols.max(1) * per_row, NONE_HELD);
         if per_row > 0 {
             extremes
                 .par_chunks_mut(per_row)
@@ -76,10 +84,18 @@ impl RowExtremes {
         within: impl Fn([f64; 2]) -> bool,
     ) -> Option<bool> {
         let index = self.index_of(half_cols)?;
-        for row in rows {
-            if !within(*self.extremes.get(index(row, col))?) {
+        // Row after row, the index a stride on: an inclusive range's
+        // iteration and the index's products per row were half the loop's
+        // instructions (it runs for every window of every cell).
+        let (stride, mut at) = (
+            self.half_widths.len() * self.cols,
+            index(*rows.start(), col),
+        );
+        for _ in 0..rows_in(&rows) {
+            if !within(*self.extremes.get(at)?) {
                 return Some(false);
             }
+            at += stride;
         }
         Some(true)
     }
@@ -102,38 +118,78 @@ impl RowExtremes {
     }
 }
 
+/// How many rows `rows` holds.
+#[inline]
+pub(super) fn rows_in(rows: &std::ops::RangeInclusive<usize>) -> usize {
+    (rows.end() + 1).saturating_sub(*rows.start())
+}
+
 /// One row's extremes for each of `wanted` (ascending half widths, each
 /// window narrower than the row), into `out` (one row's worth per width).
 /// A window of half width `h` is the union of one of half width `a`
 /// centred on the column and two shifted by `h - a` either way, which
 /// covers it when `h <= 3 a + 1`: so each width comes from the widest
 /// already built, widened first where it is too narrow (a few passes over
-/// the row in all, whatever the widths).
+/// the row in all, whatever the widths), the last pass of each width
+/// straight into `out` (and read from there by the next width).
 fn row_extremes(ranges: &[f64], wanted: &[usize], out: &mut [[f64; 2]]) {
     let cols = ranges.len();
-    let mut built: Vec<[f64; 2]> = ranges.iter().map(|&r| [r, r]).collect();
-    let mut built_half = 0;
-    let mut next = vec![[f64::NAN; 2]; cols];
-    for (&half, out) in wanted.iter().zip(out.chunks_mut(cols)) {
-        while built_half != half {
-            let widest = (3 * built_half + 1).min(half);
-            widen(&built, widest - built_half, &mut next);
-            std::mem::swap(&mut built, &mut next);
-            built_half = widest;
+    let single: Vec<[f64; 2]> = ranges
+        .iter()
+        .map(|&r| if r.is_nan() { NONE_HELD } else { [r, r] })
+        .collect();
+    let mut scratch = [vec![NONE_HELD; cols], vec![NONE_HELD; cols]];
+    let (mut source, mut source_half): (&[[f64; 2]], usize) = (&single, 0);
+    for (&half, target) in wanted.iter().zip(out.chunks_mut(cols)) {
+        widen_to(source, source_half, half, target, &mut scratch);
+        (source, source_half) = (target, half);
+    }
+}
+
+/// Into `target`, the extremes of half width `to_half` from `source`'s
+/// of half width `from_half` (at most): widened by `3 h + 1` at most per
+/// pass, the passes before the last in `scratch` (turn about).
+fn widen_to(
+    source: &[[f64; 2]],
+    from_half: usize,
+    to_half: usize,
+    target: &mut [[f64; 2]],
+    scratch: &mut [Vec<[f64; 2]>; 2],
+) {
+    let [even, odd] = scratch;
+    let (mut built_half, mut turn) = (from_half, 0);
+    let mut widest = (3 * built_half + 1).min(to_half);
+    if widest == to_half {
+        return widen(source, to_half - built_half, target);
+    }
+    widen(source, widest - built_half, even);
+    built_half = widest;
+    loop {
+        let (built, next) = if turn == 0 {
+            (&*even, &mut *odd)
+        } else {
+            (&*odd, &mut *even)
+        };
+        widest = (3 * built_half + 1).min(to_half);
+        if widest == to_half {
+            return widen(built, to_half - built_half, target);
         }
-        out.copy_from_slice(&built);
+        widen(built, widest - built_half, next);
+        (built_half, turn) = (widest, 1 - turn);
     }
 }
 
 /// Per column, into `out`, the extremes of `extremes` at the column and at
 /// `shift` columns either side (less than the row's width), wrapping around
-/// the sweep. `f64::min` and `max` pass over NaN (empty cells).
+/// the sweep. Plain comparisons: no extreme is NaN ([`NONE_HELD`]).
 fn widen(extremes: &[[f64; 2]], shift: usize, out: &mut [[f64; 2]]) {
     let cols = extremes.len();
+    let lower = |a: f64, b: f64| if b < a { b } else { a };
+    let upper = |a: f64, b: f64| if b > a { b } else { a };
     let at = |own: [f64; 2], before: [f64; 2], after: [f64; 2]| {
         [
-            own[0].min(before[0]).min(after[0]),
-            own[1].max(before[1]).max(after[1]),
+            lower(lower(own[0], before[0]), after[0]),
+            upper(upper(own[1], before[1]), after[1]),
         ]
     };
     // The columns whose window wraps around the sweep, then the rest
@@ -165,7 +221,7 @@ mod tests {
         (0..=2 * half)
             .map(|k| ranges[row * cols + (col + cols + k - half) % cols])
             .filter(|r| !r.is_nan())
-            .fold([f64::NAN, f64::NAN], |[lo, hi], r| [lo.min(r), hi.max(r)])
+            .fold(NONE_HELD, |[lo, hi], r| [lo.min(r), hi.max(r)])
     }
 
     #[test]
