@@ -56,7 +56,7 @@ pub(super) fn rasterize_columns(
             }
             rasterize_quad_at(
                 source,
-                target,
+                (target, &whole),
                 geometry,
                 (vertices, proxies),
                 (row, col),
@@ -75,7 +75,7 @@ pub(super) fn rasterize_columns(
 #[inline(never)]
 fn rasterize_quad_at(
     source: &Source,
-    target: &Target,
+    (target, whole): (&Target, &WholeQuads),
     geometry: &ImageGeometry,
     (vertices, proxies): (&Vertices, &Proxies),
     (row, col): (usize, usize),
@@ -103,6 +103,15 @@ fn rasterize_quad_at(
     } else {
         bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
     };
+    // Both triangles across a bridged row (most of KITTI's quads): the
+    // whole quads' path where it takes them, the same candidates as
+    // `rasterize_quad`'s (the raster tests hold them to each other).
+    if let (false, [Some(([va, _, _], first)), Some(([_, vd, _], second))]) = (own, quad) {
+        let bits = if first { EDGE_FIRST } else { 0 } | if second { EDGE_SECOND } else { 0 };
+        if whole.rasterize([va, vb, vc, vd], bits, out) {
+            return;
+        }
+    }
     if (quad[0].is_none() && quad[1].is_none()) || rasterize_quad(target, geometry, quad, out) {
         return;
     }
@@ -379,7 +388,7 @@ pub(super) fn within_bands(
 /// with barycentric weights `w`: the range where it meets the triangle's
 /// plane (computed once a ray falls inside: about half the triangles hold
 /// none, a quad's two share its one or two rays).
-#[inline]
+#[inline(always)]
 pub(super) fn hit(
     target: &Target,
     cell: usize,
