@@ -125,18 +125,28 @@ impl ColumnRows {
     fn gather(&mut self, source: &Source, rows: usize, col: usize) {
         let table = &source.columns;
         self.resize(rows);
-        let first = col * rows;
+        let column = col * rows..(col + 1) * rows;
+        // The table's column as slices: no bounds check per read.
+        let [px, py, pz] = &table.point;
+        let (px, py, pz) = (
+            &px[column.clone()],
+            &py[column.clone()],
+            &pz[column.clone()],
+        );
+        let time_ns = &table.time_ns[column.clone()];
+        let azimuth_rad = &table.azimuth_rad[column.clone()];
+        let elevation_rad = &table.elevation_rad[column.clone()];
+        let range_m = &table.range_m[column];
         let mut live = 0;
         for row in 0..rows {
-            let at = first + row;
-            for (axis, column) in self.point.iter_mut().zip(&table.point) {
-                axis[live] = column[at];
+            for (axis, value) in self.point.iter_mut().zip([px[row], py[row], pz[row]]) {
+                axis[live] = value;
             }
             self.row[live] = row;
-            self.time_ns[live] = table.time_ns[at];
-            self.source_azimuth_rad[live] = table.azimuth_rad[at];
-            self.source_elevation_rad[live] = table.elevation_rad[at];
-            live += usize::from(table.range_m[at].is_finite());
+            self.time_ns[live] = time_ns[row];
+            self.source_azimuth_rad[live] = azimuth_rad[row];
+            self.source_elevation_rad[live] = elevation_rad[row];
+            live += usize::from(range_m[row].is_finite());
         }
         self.live = live;
         self.landing[..live].fill(Landing::Seen);
@@ -181,16 +191,23 @@ impl ColumnRows {
     fn write(&self, geometry: &ImageGeometry, column: &mut [Vertex]) {
         // Every vertex is written: the buffer is reused from the last render.
         debug_assert!(self.row[..self.live].iter().all(|&row| row < column.len()));
+        let live = self.live;
+        // Each array cut to the returns: no bounds check per vertex.
+        let (rows, landing) = (&self.row[..live], &self.landing[..live]);
+        let [mx, my, mz] = &self.moved;
+        let (mx, my, mz) = (&mx[..live], &my[..live], &mz[..live]);
+        let (row_f, azimuth) = (&self.row_f[..live], &self.azimuth_rad[..live]);
+        let time_ns = &self.time_ns[..live];
         let mut next = 0;
         for (row, vertex) in column.iter_mut().enumerate() {
             *vertex = Vertex::NONE;
-            if next < self.live && self.row[next] == row {
-                if self.landing[next] != Landing::None {
+            if next < live && rows[next] == row {
+                if landing[next] != Landing::None {
                     *vertex = Vertex {
-                        position: self.moved_at(next),
-                        row: self.row_f[next],
-                        col: geometry.col_f(self.azimuth_rad[next]),
-                        time_ns: self.time_ns[next],
+                        position: Point3::new(mx[next], my[next], mz[next]),
+                        row: row_f[next],
+                        col: geometry.col_f(azimuth[next]),
+                        time_ns: time_ns[next],
                     };
                 }
                 next += 1;
@@ -201,11 +218,6 @@ impl ColumnRows {
     #[inline]
     fn point_at(&self, at: usize) -> Point3<f64> {
         Point3::new(self.point[0][at], self.point[1][at], self.point[2][at])
-    }
-
-    #[inline]
-    fn moved_at(&self, at: usize) -> Point3<f64> {
-        Point3::new(self.moved[0][at], self.moved[1][at], self.moved[2][at])
     }
 
     #[inline]

@@ -6,7 +6,7 @@
 use nalgebra::Vector3;
 
 use super::flat_triangle::{FlatTriangle, SharedDiagonal};
-use super::full_quad::rasterize_full_quad;
+use super::full_quad::WholeQuads;
 use super::mesh::{
     EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
     on_one_surface,
@@ -27,7 +27,7 @@ pub(super) fn rasterize_columns(
     proxies: &Proxies,
     columns: std::ops::Range<usize>,
 ) -> Vec<Candidate> {
-    let rows = geometry.rows;
+    let (rows, cols) = (geometry.rows, geometry.cols);
     // About one candidate per quad: room for all without regrowing.
     let quads = columns.len() * rows.saturating_sub(1);
     let mut out = Vec::with_capacity(quads + quads / 2);
@@ -36,11 +36,27 @@ pub(super) fn rasterize_columns(
     let own: Vec<bool> = (0..rows.saturating_sub(1))
         .map(|row| !proxies.bridged_row[row] && !proxies.bridged_row[row + 1])
         .collect();
+    let whole = WholeQuads::of(target, geometry);
+    let joins = &source.surfaces.joins;
     for col in columns {
+        let next = if col + 1 == cols { 0 } else { col + 1 };
+        // The quads' left and right vertices, each column's rows in order.
+        let left = &vertices.at[col * rows..(col + 1) * rows];
+        let right = &vertices.at[next * rows..(next + 1) * rows];
         for (row, &own) in own.iter().enumerate() {
+            let bits = joins[row * cols + col];
+            if own && bits & (QUAD_FIRST | QUAD_SECOND) == 0 {
+                continue;
+            }
+            if own && bits & (QUAD_FIRST | QUAD_SECOND) == QUAD_FIRST | QUAD_SECOND {
+                let quad = [&left[row], &right[row], &left[row + 1], &right[row + 1]];
+                if whole.rasterize(quad, bits, &mut out) {
+                    continue;
+                }
+            }
             rasterize_quad_at(
                 source,
-                target,
+                (target, &whole),
                 geometry,
                 (vertices, proxies),
                 (row, col),
@@ -52,12 +68,14 @@ pub(super) fn rasterize_columns(
     out
 }
 
-/// The quad at source (`row`, `col`) rasterised into `out`; `own` where
-/// neither of its rows bridged a dropout.
-#[inline]
+/// The quad at source (`row`, `col`) rasterised into `out`, where it is
+/// not a whole quad ([`WholeQuads`]: one in twenty on a dense sensor);
+/// `own` where neither of its rows bridged a dropout. (Out of line: the
+/// whole quads' loop keeps its values in registers.)
+#[inline(never)]
 fn rasterize_quad_at(
     source: &Source,
-    target: &Target,
+    (target, whole): (&Target, &WholeQuads),
     geometry: &ImageGeometry,
     (vertices, proxies): (&Vertices, &Proxies),
     (row, col): (usize, usize),
@@ -67,18 +85,7 @@ fn rasterize_quad_at(
     let cols = geometry.cols;
     let joins = &source.surfaces.joins;
     let a = row * cols + col;
-    if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == 0 {
-        return;
-    }
     let next = if col + 1 == cols { 0 } else { col + 1 };
-    if own && joins[a] & (QUAD_FIRST | QUAD_SECOND) == QUAD_FIRST | QUAD_SECOND {
-        let (at, rows) = (&vertices.at, vertices.rows);
-        let (left, right) = (col * rows + row, next * rows + row);
-        let quad = [&at[left], &at[right], &at[left + 1], &at[right + 1]];
-        if rasterize_full_quad(target, geometry, quad, joins[a], out) {
-            return;
-        }
-    }
     // Either triangle needs the diagonal's two vertices.
     let (Some(vb), Some(vc)) = (vertices.get(row, next), vertices.get(row + 1, col)) else {
         return;
@@ -96,6 +103,15 @@ fn rasterize_quad_at(
     } else {
         bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
     };
+    // Both triangles across a bridged row (most of KITTI's quads): the
+    // whole quads' path where it takes them, the same candidates as
+    // `rasterize_quad`'s (the raster tests hold them to each other).
+    if let (false, [Some(([va, _, _], first)), Some(([_, vd, _], second))]) = (own, quad) {
+        let bits = if first { EDGE_FIRST } else { 0 } | if second { EDGE_SECOND } else { 0 };
+        if whole.rasterize([va, vb, vc, vd], bits, out) {
+            return;
+        }
+    }
     if (quad[0].is_none() && quad[1].is_none()) || rasterize_quad(target, geometry, quad, out) {
         return;
     }
@@ -353,8 +369,8 @@ fn rasterize_quad<'v>(
 /// whose rows begin half a row past it. (Rows in between are kept: they
 /// hold rays in the box, or, rarely, ones the weights reject.) `lo > hi`
 /// where none is left.
-#[inline]
-fn within_bands(
+#[inline(always)]
+pub(super) fn within_bands(
     spans: &[Span],
     (mut lo, mut hi): (usize, usize),
     (min, max): (f64, f64),
@@ -372,7 +388,7 @@ fn within_bands(
 /// with barycentric weights `w`: the range where it meets the triangle's
 /// plane (computed once a ray falls inside: about half the triangles hold
 /// none, a quad's two share its one or two rays).
-#[inline]
+#[inline(always)]
 pub(super) fn hit(
     target: &Target,
     cell: usize,
@@ -389,11 +405,13 @@ pub(super) fn hit(
     );
     let plane = plane.get_or_insert_with(|| TrianglePlane::through(v));
     let along = plane.normal.dot(&e);
-    if along.abs() < 1e-12 * plane.normal_norm {
+    if along.abs() < plane.parallel {
         return None;
     }
     let range = plane.offset / along;
-    if !(range > 0.0 && range.is_finite()) {
+    // Positive and finite, by two comparisons (`is_finite` beside the sign
+    // took two dozen instructions: one hit per quad).
+    if !(range > 0.0 && range < f64::INFINITY) {
         return None;
     }
     let time = (w0 * v[0].time_ns as f64 + w1 * v[1].time_ns as f64 + w2 * v[2].time_ns as f64)
@@ -503,11 +521,24 @@ fn box_in_reach(
     (c_min, c_max): (f64, f64),
 ) -> ((usize, usize), (f64, f64)) {
     let (row_reach, col_reach) = (target.reach.0 + REACH_SLACK, target.reach.1 + REACH_SLACK);
-    let row_lo = index_of(most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0));
-    let row_hi = index_of(least(r_max.ceil(), (r_max + row_reach).floor())).min(geometry.rows - 1);
+    let (row_lo, row_hi) = box_rows((r_min, r_max), row_reach, geometry.rows - 1);
     let col_lo = most(c_min.floor(), (c_min - col_reach).ceil());
     let col_hi = least(c_max.ceil(), (c_max + col_reach).floor());
     ((row_lo, row_hi), (col_lo, col_hi))
+}
+
+/// [`box_in_reach`]'s rows, within the image (`last_row` its last), of
+/// the box of rows `[r_min, r_max]`, `row_reach` the target's reach plus
+/// [`REACH_SLACK`].
+#[inline(always)]
+pub(super) fn box_rows(
+    (r_min, r_max): (f64, f64),
+    row_reach: f64,
+    last_row: usize,
+) -> (usize, usize) {
+    let row_lo = index_of(most(most(r_min.floor(), (r_min - row_reach).ceil()), 0.0));
+    let row_hi = index_of(least(r_max.ceil(), (r_max + row_reach).floor())).min(last_row);
+    (row_lo, row_hi)
 }
 
 /// The target cells whose rays can lie in a quad's box of rows `[r_min,
@@ -535,15 +566,17 @@ pub(super) fn quad_cells(
 /// index reaches either): half the instructions of the unsigned
 /// conversion, four per quad.
 #[inline(always)]
-fn index_of(x: f64) -> usize {
+pub(super) fn index_of(x: f64) -> usize {
     (x as i64).max(0) as usize
 }
 
 /// The plane through a triangle's vertices.
 pub(super) struct TrianglePlane {
-    /// `(b - a) x (c - a)`, unnormalised, and its length.
+    /// `(b - a) x (c - a)`, unnormalised.
     normal: Vector3<f64>,
-    normal_norm: f64,
+    /// `1e-12` of its length: a ray at a smaller `normal . e` runs along
+    /// the plane.
+    parallel: f64,
     /// `normal . a`.
     offset: f64,
     /// The unit normal, as the candidates carry it.
@@ -561,7 +594,7 @@ impl TrianglePlane {
         let unit = normal / normal_norm.max(1e-300);
         Self {
             normal,
-            normal_norm,
+            parallel: 1e-12 * normal_norm,
             offset: normal.dot(&v[0].position.coords),
             unit: [unit.x as f32, unit.y as f32, unit.z as f32],
         }
@@ -727,9 +760,7 @@ mod tests {
                 let bits = if first_edge { EDGE_FIRST } else { 0 }
                     | if second_edge { EDGE_SECOND } else { 0 };
                 let mut whole = Vec::new();
-                if rasterize_full_quad(
-                    &target,
-                    &geometry,
+                if WholeQuads::of(&target, &geometry).rasterize(
                     [&v[0], &v[1], &v[2], &v[3]],
                     bits,
                     &mut whole,
