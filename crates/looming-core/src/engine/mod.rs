@@ -33,6 +33,7 @@ pub mod egomotion;
 pub mod grid;
 pub mod layout;
 mod result;
+mod spare;
 mod surface;
 pub mod threat;
 pub mod trajectory;

@@ -158,7 +158,7 @@ impl Surfaces {
     /// `cells` cells, every per-cell field to be written (`write_fits`).
     /// (In the fields of a dropped one where there is one: see `Drop`.)
     fn empty(cells: usize, cols: usize) -> Self {
-        use spare::filled;
+        use crate::engine::spare::filled;
         let spare = spare::FIELDS.take();
         Self {
             range_m: filled(spare.range_m, cells, f32::NAN),

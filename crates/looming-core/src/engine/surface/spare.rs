@@ -3,10 +3,9 @@
 //! 21 MB, whose fresh pages (the allocator hands such blocks back to the
 //! system when freed) cost the plane fits more to fault in than to fill.
 
-use std::sync::Mutex;
-
 use nalgebra::Vector3;
 
+use crate::engine::spare::Pool;
 use crate::engine::window_sums::Moments;
 
 /// One scan's buffers, empty or of an earlier scan (contents overwritten).
@@ -16,36 +15,6 @@ pub(super) struct Spare {
     pub ranges: Vec<f64>,
     pub sums: Vec<Moments>,
     pub extremes: Vec<[f64; 2]>,
-}
-
-/// Buffers given back for later scans, at most [`MAX_SPARE`] (the
-/// surfaces of a pair's two scans, of a few sensors, are estimated at once).
-pub(super) struct Pool<T>(Mutex<Vec<T>>);
-
-const MAX_SPARE: usize = 4;
-
-impl<T: Default> Pool<T> {
-    const fn new() -> Self {
-        Self(Mutex::new(Vec::new()))
-    }
-
-    /// Buffers given back earlier, or new empty ones.
-    pub(super) fn take(&self) -> T {
-        self.0
-            .lock()
-            .ok()
-            .and_then(|mut spare| spare.pop())
-            .unwrap_or_default()
-    }
-
-    /// Keep `buffers` for a later [`Pool::take`].
-    pub(super) fn give(&self, buffers: T) {
-        if let Ok(mut spare) = self.0.lock()
-            && spare.len() < MAX_SPARE
-        {
-            spare.push(buffers);
-        }
-    }
 }
 
 /// The returns' buffers ([`Spare`]) of scans done.
@@ -67,10 +36,3 @@ pub(super) struct Fields {
 
 /// The per-cell fields of dropped surfaces.
 pub(super) static FIELDS: Pool<Fields> = Pool::new();
-
-/// `buffer` cleared and filled with `len` copies of `value`.
-pub(super) fn filled<T: Clone>(mut buffer: Vec<T>, len: usize, value: T) -> Vec<T> {
-    buffer.clear();
-    buffer.resize(len, value);
-    buffer
-}

@@ -10,6 +10,7 @@
 use nalgebra::Point3;
 use rayon::prelude::*;
 
+use crate::engine::spare::Pool;
 use crate::engine::surface::Surfaces;
 use crate::model::StampNs;
 
@@ -37,7 +38,7 @@ impl SourceColumns {
     pub fn of(surfaces: &Surfaces, time_ns: &[StampNs]) -> Self {
         let cols = surfaces.cols.max(1);
         let rows = surfaces.range_m.len() / cols;
-        let spare = SPARE.with(|spare| spare.take()).unwrap_or_default();
+        let spare = SPARE.take();
         let mut table = Self {
             range_m: spare.range_m,
             point: spare.point,
@@ -162,14 +163,12 @@ impl Drop for SourceColumns {
             elevation_rad: take(&mut self.elevation_rad),
             shares_time: take(&mut self.shares_time),
         };
-        SPARE.with(|slot| slot.replace(Some(spare)));
+        SPARE.give(spare);
     }
 }
 
-thread_local! {
-    /// The last pair's table's buffers on this thread.
-    static SPARE: std::cell::RefCell<Option<Spare>> = const { std::cell::RefCell::new(None) };
-}
+/// The buffers of dropped tables.
+static SPARE: Pool<Spare> = Pool::new();
 
 #[cfg(test)]
 mod tests {
