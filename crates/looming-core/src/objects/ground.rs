@@ -54,7 +54,7 @@ impl GroundFit {
                 .iter()
                 .filter_map(|&cell| Some((cell, points.get(cell)?)))
         };
-        let heights = candidate_points().map(|(_, p)| p[2]);
+        let heights = candidate_points().map(|(_, p)| super::order::key(p[2]));
         let mut heights = super::collect_bounded(candidates.len(), heights);
         let height = median(&mut heights)?;
         let near = |p: &[f64; 3]| {
@@ -90,20 +90,21 @@ impl GroundFit {
     }
 }
 
-/// The median of `values` (the mean of the middle two for an even count),
-/// by selection, not a sort: tens of thousands of ground cells per scan.
-/// Reorders `values`.
-fn median(values: &mut [f64]) -> Option<f64> {
-    let (mid, even) = (values.len() / 2, values.len().is_multiple_of(2));
-    if values.is_empty() {
+/// The median of the values whose [`super::order::key`]s `keys` holds
+/// (the mean of the middle two for an even count), by selection, not a
+/// sort: tens of thousands of ground cells per scan. Reorders `keys`.
+fn median(keys: &mut [i64]) -> Option<f64> {
+    let (mid, even) = (keys.len() / 2, keys.len().is_multiple_of(2));
+    if keys.is_empty() {
         return None;
     }
-    let (below, &mut upper, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
+    let (below, &mut upper, _) = keys.select_nth_unstable(mid);
+    let upper = super::order::value(upper);
     if !even {
         return Some(upper);
     }
     // The lower middle is the largest of those before the middle.
-    let lower = below.iter().copied().max_by(f64::total_cmp)?;
+    let lower = super::order::value(*below.iter().max()?);
     Some(0.5 * (upper + lower))
 }
 
@@ -211,7 +212,11 @@ mod tests {
                 n if n % 2 == 1 => Some(sorted[n / 2]),
                 n => Some(0.5 * (sorted[n / 2] + sorted[n / 2 - 1])),
             };
-            assert_eq!(median(&mut values.clone()), expected, "{values:?}");
+            let mut keys: Vec<i64> = values
+                .iter()
+                .map(|&v| crate::objects::order::key(v))
+                .collect();
+            assert_eq!(median(&mut keys), expected, "{values:?}");
         }
     }
 }
