@@ -164,8 +164,13 @@ fn ground_candidates(looming: &PairLooming, points: &CellPoints) -> Vec<usize> {
         let Some(n) = looming.normal.get(cell) else {
             return false;
         };
-        let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
+        // (`n[2] > 0.4` first: the tilt test implies it, as a normal longer
+        // than 0.5 within 15 degrees of z rises more than 0.48; a wall's or
+        // an object's normal is turned away without a root and a division.)
+        let upward = n[2] > 0.4 && {
+            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            norm > 0.5 && f64::from(n[2] / norm) >= min_cos
+        };
         upward && points.get(cell).is_some_and(|p| p[2] < 0.0)
     });
     super::collect_bounded(looming.mask.len(), candidates)
