@@ -616,7 +616,7 @@ mod tests {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (state >> 8) as f32 / (1 << 24) as f32
         };
-        let mut normal = |next: &mut dyn FnMut() -> f32| -> [f32; 3] {
+        let normal = |next: &mut dyn FnMut() -> f32| -> [f32; 3] {
             let (azimuth, elevation) = (next() * 6.3, next() * 3.2 - 1.6);
             let length = [0.0, 0.5, 0.7, 0.71, 1.0][(next() * 5.0) as usize % 5];
             [
