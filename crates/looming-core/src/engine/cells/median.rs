@@ -238,8 +238,8 @@ mod tests {
             for lane in 0..LANES {
                 let mut one: [i32; 9] = std::array::from_fn(|k| expected[k][lane]);
                 sort_nine(&mut one);
-                for k in 0..9 {
-                    expected[k][lane] = one[k];
+                for (row, key) in expected.iter_mut().zip(one) {
+                    row[lane] = key;
                 }
             }
             assert_eq!(keys, expected);
