@@ -369,20 +369,38 @@ fn ratio(part: u64, whole: u64) -> Option<f64> {
 
 /// Median (mean of the two middle values for an even count); `None` when empty.
 pub fn median(values: &mut [f64]) -> Option<f64> {
-    let n = values.len();
+    let mut keys: Vec<i64> = values.iter().map(|&v| total_order_key(v)).collect();
+    median_of_keys(&mut keys)
+}
+
+/// [`median`] of the values whose [`total_order_key`]s `keys` holds (the
+/// pair's tens of thousands of cells: an integer comparison in the
+/// selection instead of `f64::total_cmp`'s, the same order). Reorders
+/// `keys`.
+fn median_of_keys(keys: &mut [i64]) -> Option<f64> {
+    let n = keys.len();
     if n == 0 {
         return None;
     }
-    let (_, &mut upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let (_, &mut upper, _) = keys.select_nth_unstable(n / 2);
+    let upper = from_total_order_key(upper);
     if n % 2 == 1 {
         return Some(upper);
     }
-    let lower = values[..n / 2]
-        .iter()
-        .copied()
-        .max_by(f64::total_cmp)
-        .expect("n >= 2");
-    Some(0.5 * (lower + upper))
+    let lower = keys[..n / 2].iter().copied().max().expect("n >= 2");
+    Some(0.5 * (from_total_order_key(lower) + upper))
+}
+
+/// An `f64`'s bits as an integer that orders as `f64::total_cmp` does
+/// (negative values' magnitude bits flipped).
+fn total_order_key(value: f64) -> i64 {
+    let bits = value.to_bits() as i64;
+    bits ^ (((bits >> 63) as u64) >> 1) as i64
+}
+
+/// The inverse of [`total_order_key`] (the flip is its own inverse).
+fn from_total_order_key(key: i64) -> f64 {
+    f64::from_bits((key ^ (((key >> 63) as u64) >> 1) as i64) as u64)
 }
 
 impl PairQuality {
@@ -414,8 +432,10 @@ impl PairQuality {
         let mut masked = MaskCounts::default();
         let mut moving = 0u64;
         let mut threat = 0u64;
-        let mut abs_d_static = Vec::new();
         let ego = looming.availability.ego_velocity;
+        // At most one value a cell: allocated once (grown by doubling, its
+        // copies were a tenth of this stage).
+        let mut abs_d_static = Vec::with_capacity(if ego { cells } else { 0 });
         for cell in 0..cells {
             let bits = looming.mask[cell];
             if bits & mask::EMPTY != 0 {
@@ -439,13 +459,18 @@ impl PairQuality {
             } else if ego {
                 let d = f64::from(looming.disagreement[cell]);
                 if d.is_finite() {
-                    abs_d_static.push(d.abs());
+                    abs_d_static.push(total_order_key(d.abs()));
                 }
             }
         }
         let static_cells = trusted - moving;
-        let abs_d_static_histogram = ego.then(|| AbsHistogram::of(abs_d_static.iter().copied()));
-        let median_abs_d_static_per_s = if ego { median(&mut abs_d_static) } else { None };
+        let abs_d_static_histogram =
+            ego.then(|| AbsHistogram::of(abs_d_static.iter().map(|&k| from_total_order_key(k))));
+        let median_abs_d_static_per_s = if ego {
+            median_of_keys(&mut abs_d_static)
+        } else {
+            None
+        };
         Self {
             points,
             trusted_points,
@@ -482,8 +507,13 @@ fn measure_ground(looming: &PairLooming, fit: Option<&GroundFit>) -> GroundQuali
     };
     let (height, plane) = (*height, *plane);
     let ego = looming.availability.ego_velocity;
-    let mut abs_fused = Vec::new();
-    let mut sides: [(Vec<f64>, Vec<f64>, u64); 2] = Default::default();
+    // At most one value a ground cell each: allocated once.
+    let mut abs_fused = Vec::with_capacity(ground.len());
+    // (The values as their total-order keys, for the medians.)
+    let mut sides: [(Vec<i64>, Vec<i64>, u64); 2] = std::array::from_fn(|_| {
+        let d = if ego { ground.len() } else { 0 };
+        (Vec::with_capacity(ground.len()), Vec::with_capacity(d), 0)
+    });
     let mut trusted_static = 0u64;
     let mut moving = 0u64;
     for &(cell, p) in ground {
@@ -497,7 +527,7 @@ fn measure_ground(looming: &PairLooming, fit: Option<&GroundFit>) -> GroundQuali
         } else {
             trusted_static += 1;
             if fused.is_finite() {
-                abs_fused.push(fused.abs());
+                abs_fused.push(total_order_key(fused.abs()));
             }
         }
         let side = match p[1] {
@@ -507,16 +537,16 @@ fn measure_ground(looming: &PairLooming, fit: Option<&GroundFit>) -> GroundQuali
         };
         side.2 += 1;
         if fused.is_finite() {
-            side.0.push(fused);
+            side.0.push(total_order_key(fused));
         }
         if ego && d.is_finite() {
-            side.1.push(d);
+            side.1.push(total_order_key(d));
         }
     }
     let [left, right] = sides.map(|(mut fused, mut d, cells)| GroundSide {
         cells,
-        median_fused_per_s: median(&mut fused),
-        median_d_per_s: median(&mut d),
+        median_fused_per_s: median_of_keys(&mut fused),
+        median_d_per_s: median_of_keys(&mut d),
     });
     GroundQuality {
         cells: ground.len() as u64,
@@ -525,8 +555,8 @@ fn measure_ground(looming: &PairLooming, fit: Option<&GroundFit>) -> GroundQuali
         height_m: Some(height),
         roll_deg: plane.map(|[_, b, _]| b.atan().to_degrees()),
         pitch_deg: plane.map(|[a, _, _]| a.atan().to_degrees()),
-        abs_fused_histogram: AbsHistogram::of(abs_fused.iter().copied()),
-        median_abs_fused_per_s: median(&mut abs_fused),
+        abs_fused_histogram: AbsHistogram::of(abs_fused.iter().map(|&k| from_total_order_key(k))),
+        median_abs_fused_per_s: median_of_keys(&mut abs_fused),
         left,
         right,
     }
@@ -890,6 +920,34 @@ mod tests {
         assert!((median / 0.003 - 1.0).abs() < 0.025, "{median}");
         assert_eq!(AbsHistogram::default().quantile(0.5), None);
         assert_eq!(AbsHistogram::of([0.0].into_iter()).quantile(0.5), Some(0.0));
+    }
+
+    #[test]
+    fn median_by_keys_is_the_total_orders() {
+        let mut state = 5u64;
+        for count in 0..60 {
+            let values: Vec<f64> = (0..count)
+                .map(|k| match k % 7 {
+                    0 => -0.0,
+                    1 => 0.0,
+                    2 => -(next_unit(&mut state) * 3.0),
+                    _ => next_unit(&mut state) * 5.0 - 1.0,
+                })
+                .collect();
+            let mut sorted = values.clone();
+            sorted.sort_by(f64::total_cmp);
+            let expected = match count {
+                0 => None,
+                n if n % 2 == 1 => Some(sorted[n / 2]),
+                n => Some(0.5 * (sorted[n / 2 - 1] + sorted[n / 2])),
+            };
+            let got = median(&mut values.clone());
+            assert_eq!(
+                got.map(f64::to_bits),
+                expected.map(f64::to_bits),
+                "{values:?}"
+            );
+        }
     }
 
     #[test]

@@ -93,6 +93,22 @@ impl TimeSeries {
         self.around(stamp_ns, after_index)
     }
 
+    /// The stretch between the samples before and after `after_index` (as
+    /// [`at_near`](Self::at_near) leaves its hint), when the series
+    /// interpolates across it.
+    pub fn interpolation_around(&self, after_index: usize) -> Option<Interpolation> {
+        let (start_ns, start) = *self.samples.get(after_index.checked_sub(1)?)?;
+        let (end_ns, end) = *self.samples.get(after_index)?;
+        (end_ns > start_ns && end_ns - start_ns <= self.max_interpolation_gap_ns).then(|| {
+            Interpolation {
+                start_ns,
+                end_ns,
+                start,
+                step: end - start,
+            }
+        })
+    }
+
     /// The value at `stamp_ns` from the samples before and after
     /// `after_index` (the first sample stamped after it).
     fn around(&self, stamp_ns: StampNs, after_index: usize) -> Option<Vector3<f64>> {
@@ -122,6 +138,31 @@ impl TimeSeries {
                 }
             }
         }
+    }
+}
+
+/// Two neighbouring samples a [`TimeSeries`] interpolates between: its
+/// value strictly between their stamps without a search, by the same
+/// expression ([`Interpolation::at`]), for callers asking many times inside
+/// one stretch (every cell of a pair asks at its source time).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Interpolation {
+    start_ns: StampNs,
+    end_ns: StampNs,
+    start: Vector3<f64>,
+    /// The end's value less the start's, as `around` takes it.
+    step: Vector3<f64>,
+}
+
+impl Interpolation {
+    /// The series' value at `stamp_ns`, strictly inside the stretch (the
+    /// same bits as [`TimeSeries::at`]); `None` elsewhere.
+    #[inline]
+    pub fn at(&self, stamp_ns: StampNs) -> Option<Vector3<f64>> {
+        (self.start_ns < stamp_ns && stamp_ns < self.end_ns).then(|| {
+            let fraction = (stamp_ns - self.start_ns) as f64 / (self.end_ns - self.start_ns) as f64;
+            self.start + self.step * fraction
+        })
     }
 }
 
@@ -253,4 +294,42 @@ pub struct ExtrinsicInfo {
     /// the LiDAR origin in the motion frame (the lever arm).
     pub motion_from_lidar: Isometry3<f64>,
     pub source: ExtrinsicSource,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Inside a stretch its interpolation gives what the series gives, bit
+    /// for bit; at its samples and outside it, nothing.
+    #[test]
+    fn a_stretchs_interpolation_is_the_series_value() {
+        let samples: Vec<(StampNs, Vector3<f64>)> = (0..40i64)
+            .map(|k| {
+                let t = k * 5_000_000 + (k % 3) * 7;
+                let s = k as f64;
+                (t, Vector3::new(10.0 - 0.3 * s, -0.0, 0.01 * s * s - 0.2))
+            })
+            .collect();
+        let series = TimeSeries::new(samples.clone(), 0.05);
+        let mut hint = 0;
+        let mut state = 9u64;
+        for _ in 0..20_000 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let stamp = (state >> 40) as i64 % 200_000_000 - 1_000_000;
+            let expected = series.at(stamp);
+            assert_eq!(series.at_near(stamp, &mut hint), expected);
+            if let Some(stretch) = series.interpolation_around(hint) {
+                match stretch.at(stamp) {
+                    Some(v) => {
+                        let e = expected.unwrap();
+                        assert_eq!(v.map(f64::to_bits), e.map(f64::to_bits), "{stamp}");
+                    }
+                    None => assert!(samples.iter().any(|s| s.0 == stamp)),
+                }
+            }
+        }
+    }
 }

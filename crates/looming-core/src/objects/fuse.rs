@@ -37,7 +37,7 @@
 
 use super::ground::CellPoints;
 use super::measure::inverse_variance_mean;
-use super::{Object, ObjectCells, PairObjects, collect_bounded};
+use super::{Object, ObjectCells, PairObjects, collect_bounded, order};
 use nalgebra::Vector3;
 
 use crate::engine::{PairLooming, ThreatLevel, mask};
@@ -288,14 +288,14 @@ fn split_by_own_value(looming: &PairLooming, cells: &[usize]) -> (Vec<usize>, Ve
 fn noise_scale(looming: &PairLooming, own: &[usize], centre: f64) -> f64 {
     let normalised = own.iter().map(|&c| {
         let sigma = f64::from(looming.fused_sigma_per_s[c]).max(1e-4);
-        (f64::from(looming.fused[c]) - centre).abs() / sigma
+        order::key((f64::from(looming.fused[c]) - centre).abs() / sigma)
     });
     let mut normalised = collect_bounded(own.len(), normalised);
     if normalised.is_empty() {
         return 1.0;
     }
     let mid = normalised.len() / 2;
-    let median = *normalised.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let median = order::select(&mut normalised, mid);
     (1.4826 * median).max(1.0)
 }
 
@@ -355,13 +355,13 @@ fn measured_face(
     let offsets = consistent_cells
         .iter()
         .filter_map(|&(c, _)| points.get(c))
-        .map(|p| normal.dot(&Vector3::from(p)));
+        .map(|p| order::key(normal.dot(&Vector3::from(p))));
     let mut offsets = collect_bounded(consistent_cells.len(), offsets);
     if offsets.is_empty() {
         return None;
     }
     let mid = offsets.len() / 2;
-    let offset_m = *offsets.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let offset_m = order::select(&mut offsets, mid);
     Some(Face {
         normal,
         offset_m,

@@ -54,7 +54,7 @@ impl GroundFit {
                 .iter()
                 .filter_map(|&cell| Some((cell, points.get(cell)?)))
         };
-        let heights = candidate_points().map(|(_, p)| p[2]);
+        let heights = candidate_points().map(|(_, p)| super::order::key(p[2]));
         let mut heights = super::collect_bounded(candidates.len(), heights);
         let height = median(&mut heights)?;
         let near = |p: &[f64; 3]| {
@@ -90,20 +90,21 @@ impl GroundFit {
     }
 }
 
-/// The median of `values` (the mean of the middle two for an even count),
-/// by selection, not a sort: tens of thousands of ground cells per scan.
-/// Reorders `values`.
-fn median(values: &mut [f64]) -> Option<f64> {
-    let (mid, even) = (values.len() / 2, values.len().is_multiple_of(2));
-    if values.is_empty() {
+/// The median of the values whose [`super::order::key`]s `keys` holds
+/// (the mean of the middle two for an even count), by selection, not a
+/// sort: tens of thousands of ground cells per scan. Reorders `keys`.
+fn median(keys: &mut [i64]) -> Option<f64> {
+    let (mid, even) = (keys.len() / 2, keys.len().is_multiple_of(2));
+    if keys.is_empty() {
         return None;
     }
-    let (below, &mut upper, _) = values.select_nth_unstable_by(mid, f64::total_cmp);
+    let (below, &mut upper, _) = keys.select_nth_unstable(mid);
+    let upper = super::order::value(upper);
     if !even {
         return Some(upper);
     }
     // The lower middle is the largest of those before the middle.
-    let lower = below.iter().copied().max_by(f64::total_cmp)?;
+    let lower = super::order::value(*below.iter().max()?);
     Some(0.5 * (upper + lower))
 }
 
@@ -163,8 +164,13 @@ fn ground_candidates(looming: &PairLooming, points: &CellPoints) -> Vec<usize> {
         let Some(n) = looming.normal.get(cell) else {
             return false;
         };
-        let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        let upward = norm > 0.5 && f64::from(n[2] / norm) >= min_cos;
+        // (`n[2] > 0.4` first: the tilt test implies it, as a normal longer
+        // than 0.5 within 15 degrees of z rises more than 0.48; a wall's or
+        // an object's normal is turned away without a root and a division.)
+        let upward = n[2] > 0.4 && {
+            let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            norm > 0.5 && f64::from(n[2] / norm) >= min_cos
+        };
         upward && points.get(cell).is_some_and(|p| p[2] < 0.0)
     });
     super::collect_bounded(looming.mask.len(), candidates)
@@ -211,7 +217,11 @@ mod tests {
                 n if n % 2 == 1 => Some(sorted[n / 2]),
                 n => Some(0.5 * (sorted[n / 2] + sorted[n / 2 - 1])),
             };
-            assert_eq!(median(&mut values.clone()), expected, "{values:?}");
+            let mut keys: Vec<i64> = values
+                .iter()
+                .map(|&v| crate::objects::order::key(v))
+                .collect();
+            assert_eq!(median(&mut keys), expected, "{values:?}");
         }
     }
 }

@@ -21,7 +21,7 @@
 //! joins the measurement by inverse variance.
 
 use super::ground::{CellPoints, cell_point};
-use super::{NO_OBJECT, Object, ObjectCells, collect_bounded};
+use super::{NO_OBJECT, Object, ObjectCells, collect_bounded, order};
 use crate::engine::egomotion::EgoEstimate;
 use crate::engine::{PairLooming, mask};
 use crate::model::Scan;
@@ -278,16 +278,16 @@ fn ego_prediction_with_sigma(
 /// Where an object's `returns` are: the 10th percentile of their ranges,
 /// their mean and their axis-aligned extent (smallest and largest x, y, z).
 fn geometry_of(returns: &[[f64; 3]]) -> (f64, [f64; 3], [f64; 3], [f64; 3]) {
-    let mut ranges: Vec<f64> = returns
+    let mut ranges: Vec<i64> = returns
         .iter()
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .map(|p| order::key((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()))
         .collect();
     // The 10th percentile by selection: objects of thousands of cells.
     let tenth = ranges.len().saturating_sub(1) / 10;
     let nearest_range_m = if ranges.is_empty() {
         f64::NAN
     } else {
-        *ranges.select_nth_unstable_by(tenth, f64::total_cmp).1
+        order::select(&mut ranges, tenth)
     };
     let n = returns.len().max(1) as f64;
     let mut centroid_m = [0.0; 3];
@@ -356,15 +356,14 @@ fn ego_prediction_sigma(looming: &PairLooming, cells: &[usize]) -> Option<f64> {
     let sigmas = cells
         .iter()
         .map(|&c| looming.ray_ego_sigma_per_s[c])
-        .filter(|s| s.is_finite());
+        .filter(|s| s.is_finite())
+        .map(|s| order::key(f64::from(s)));
     let mut sigmas = collect_bounded(cells.len(), sigmas);
     if sigmas.is_empty() {
         return None;
     }
     let mid = sigmas.len() / 2;
-    Some(f64::from(
-        *sigmas.select_nth_unstable_by(mid, f32::total_cmp).1,
-    ))
+    Some(order::select(&mut sigmas, mid))
 }
 
 /// Two estimates and their standard errors combined by inverse variance.
@@ -389,9 +388,10 @@ fn measures_approach(looming: &PairLooming, cell: usize, min_cos: f32) -> bool {
 /// Inverse-variance weighted median of `values` over `cells`, and its
 /// standard error; `None` with fewer than [`MIN_MEASURED_CELLS`] cells.
 fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, f64)> {
+    // The values as their order keys ([`order::key`]), for the selections.
     let weighted = cells.iter().filter(|&&c| values[c].is_finite()).map(|&c| {
         let sigma = f64::from(sigmas[c]).max(1e-3);
-        (f64::from(values[c]), 1.0 / (sigma * sigma))
+        (order::key(f64::from(values[c])), 1.0 / (sigma * sigma))
     });
     let mut weighted = collect_bounded(cells.len(), weighted);
     if weighted.len() < MIN_MEASURED_CELLS {
@@ -404,7 +404,7 @@ fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, 
     // The deviations from the centre in place of the values, in the order
     // the weights were summed in (no second list).
     for value in &mut weighted {
-        value.0 = (value.0 - centre).abs();
+        value.0 = order::key((order::value(value.0) - centre).abs());
     }
     let mad = weighted_median(&mut weighted);
     let effective = sum_w * sum_w / sum_w2;
@@ -418,11 +418,12 @@ fn robust_mean(cells: &[usize], values: &[f32], sigmas: &[f32]) -> Option<(f64, 
 /// in ascending order, at which the running sum of the weights reaches half
 /// their total. By selection (quickselect on the values, keeping the weight
 /// of all that lie below the part still searched), not a sort: an object's
-/// cells run to thousands and this runs several times per object. Reorders
-/// `values`.
-fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
+/// cells run to thousands and this runs several times per object. The
+/// values as their order keys ([`order::key`]: integers compared, in
+/// `total_cmp`'s order). Reorders `values`.
+fn weighted_median(values: &mut [(i64, f64)]) -> f64 {
     let half = values.iter().map(|v| v.1).sum::<f64>() / 2.0;
-    let by_value = |a: &(f64, f64), b: &(f64, f64)| a.0.total_cmp(&b.0);
+    let by_value = |a: &(i64, f64), b: &(i64, f64)| a.0.cmp(&b.0);
     // `values[lo..hi]` holds the answer; `below` weighs `values[..lo]`, all
     // of which precede it in ascending order.
     let (mut lo, mut hi, mut below) = (0, values.len(), 0.0);
@@ -433,7 +434,7 @@ fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
         if below + left_weight >= half {
             hi = mid;
         } else if below + left_weight + pivot.1 >= half {
-            return pivot.0;
+            return order::value(pivot.0);
         } else {
             below += left_weight + pivot.1;
             lo = mid + 1;
@@ -445,15 +446,15 @@ fn weighted_median(values: &mut [(f64, f64)]) -> f64 {
     for &(value, weight) in tail.iter() {
         seen += weight;
         if seen >= half {
-            return value;
+            return order::value(value);
         }
     }
     // Not reached (weights not finite): the largest value, as a full scan.
     values
         .iter()
         .map(|v| v.0)
-        .max_by(f64::total_cmp)
-        .unwrap_or(f64::NAN)
+        .max()
+        .map_or(f64::NAN, order::value)
 }
 
 /// Below this many values [`weighted_median`] sorts what is left.
@@ -496,7 +497,9 @@ mod tests {
                 })
                 .collect();
             let expected = sorted_scan(&values);
-            assert_eq!(weighted_median(&mut values.clone()), expected, "{values:?}");
+            let mut keyed: Vec<(i64, f64)> =
+                values.iter().map(|&(v, w)| (order::key(v), w)).collect();
+            assert_eq!(weighted_median(&mut keyed), expected, "{values:?}");
         }
     }
 

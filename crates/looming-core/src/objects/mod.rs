@@ -14,6 +14,7 @@
 mod fuse;
 pub mod ground;
 mod measure;
+pub mod order;
 mod segment;
 mod track;
 

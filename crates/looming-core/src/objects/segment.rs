@@ -6,8 +6,6 @@
 //! them and the farther ray is large: a steep step in range (a car in front
 //! of a wall) makes `beta` small. One breadth-first pass over the cells.
 
-use std::collections::VecDeque;
-
 use super::ground::{CellPoints, GroundFit};
 use super::{NO_OBJECT, ObjectConfig};
 use crate::engine::PairLooming;
@@ -26,7 +24,10 @@ pub fn segment(
     // Visited by a search (an object's, or a group too small to be one).
     let mut visited = vec![false; rows * cols];
     let min_sin_beta = config.join_angle_deg.to_radians().sin();
-    let mut queue = VecDeque::new();
+    // The cells found and not yet searched, with their row and column (no
+    // division per cell). A stack, not a queue: the join relation is
+    // symmetric, so a search finds the same group in any order.
+    let mut pending = Vec::new();
     let mut members = Vec::new();
     let mut next = 0u32;
     for seed in 0..rows * cols {
@@ -35,27 +36,29 @@ pub fn segment(
         }
         visited[seed] = true;
         members.clear();
-        queue.push_back(seed);
-        while let Some(cell) = queue.pop_front() {
+        pending.push(Place::of(seed, cols));
+        while let Some(place) = pending.pop() {
+            let cell = place.cell;
             members.push(cell);
             let here = points[cell]
                 .expect("queued cells have a point")
                 .map(f64::from);
-            for (neighbour, between) in neighbours(cell, rows, cols) {
+            for (neighbour, between) in neighbours(place, rows, cols) {
+                let neighbour_cell = neighbour.cell;
                 // A neighbour already searched first: a cell joins one group
                 // (half the neighbours are the cells they were reached from).
-                if visited[neighbour] {
+                if visited[neighbour_cell] {
                     continue;
                 }
-                let Some(there) = points[neighbour].map(|p| p.map(f64::from)) else {
+                let Some(there) = points[neighbour_cell].map(|p| p.map(f64::from)) else {
                     continue;
                 };
                 // Two columns away only across a dropout, never across
                 // another return (a pole before a wall).
                 let across_a_return = between.is_some_and(|b| points[b].is_some());
                 if !across_a_return && joined(&here, &there, min_sin_beta, config) {
-                    visited[neighbour] = true;
-                    queue.push_back(neighbour);
+                    visited[neighbour_cell] = true;
+                    pending.push(neighbour);
                 }
             }
         }
@@ -92,41 +95,78 @@ fn object_candidates(
         .collect()
 }
 
+/// A cell with its row and column.
+#[derive(Clone, Copy)]
+struct Place {
+    cell: usize,
+    row: usize,
+    col: usize,
+}
+
+impl Place {
+    fn of(cell: usize, cols: usize) -> Self {
+        Self {
+            cell,
+            row: cell / cols,
+            col: cell % cols,
+        }
+    }
+}
+
 /// The four neighbours of a cell, and the cells two columns away (a
 /// one-cell dropout does not split an object) with the cell between; columns
 /// wrap.
 fn neighbours(
-    cell: usize,
+    place: Place,
     rows: usize,
     cols: usize,
-) -> impl Iterator<Item = (usize, Option<usize>)> {
-    let (row, col) = (cell / cols, cell % cols);
+) -> impl Iterator<Item = (Place, Option<usize>)> {
+    let Place { cell, row, col } = place;
     // Columns `k` (1 or 2) to either side, wrapped by a comparison, not a
     // division (this runs for every cell of every object; `k % cols` for
     // an image narrower than `k` columns).
     let row_start = row * cols;
+    let at = |col: usize| Place {
+        cell: row_start + col,
+        row,
+        col,
+    };
     let left = |k: usize| {
         let k = if k < cols { k } else { k % cols };
-        row_start + if col >= k { col - k } else { col + cols - k }
+        at(if col >= k { col - k } else { col + cols - k })
     };
     let right = |k: usize| {
         let k = if k < cols { k } else { k % cols };
         let c = col + k;
-        row_start + if c >= cols { c - cols } else { c }
+        at(if c >= cols { c - cols } else { c })
     };
-    let up = (row + 1 < rows).then(|| (cell + cols, None));
-    let down = (row > 0).then(|| (cell - cols, None));
+    let up = (row + 1 < rows).then(|| {
+        let up = Place {
+            cell: cell + cols,
+            row: row + 1,
+            col,
+        };
+        (up, None)
+    });
+    let down = (row > 0).then(|| {
+        let down = Place {
+            cell: cell - cols,
+            row: row - 1,
+            col,
+        };
+        (down, None)
+    });
     [
         Some((left(1), None)),
         Some((right(1), None)),
-        Some((left(2), Some(left(1)))),
-        Some((right(2), Some(right(1)))),
+        Some((left(2), Some(left(1).cell))),
+        Some((right(2), Some(right(1).cell))),
         up,
         down,
     ]
     .into_iter()
     .flatten()
-    .filter(move |&(n, _)| n != cell)
+    .filter(move |(n, _)| n.cell != cell)
 }
 
 /// Whether two neighbouring returns are on one object: the angle criterion,

@@ -1,6 +1,7 @@
 //! A cell's differences taken to its current return's instant where the
 //! ego accelerates ([`to_instant`]), with the velocity lookups it needs.
 
+use crate::model::motion::Interpolation;
 use crate::model::{PairMotion, StampNs};
 
 use super::Raw;
@@ -24,7 +25,7 @@ pub(super) fn to_instant(
         return raw;
     }
     let (Some(before), Some((now, now_speed_mps))) = (
-        motion.velocity_near(source_time_ns, &mut velocities.source_hint),
+        velocities.source(motion, source_time_ns),
         velocities.current(motion, col, time_ns),
     ) else {
         return raw;
@@ -49,6 +50,10 @@ pub(super) fn to_instant(
 /// one lookup per column instead of one per cell.
 pub(super) struct InstantVelocities {
     source_hint: usize,
+    /// The stretch of the velocity series the last source time asked fell
+    /// in: the next ones (a render's interpolated times, close together)
+    /// mostly fall in it too.
+    source_stretch: Option<Interpolation>,
     hint: usize,
     /// By column: the time, ns, and the velocity then, if known.
     by_column: Vec<Option<(StampNs, Option<VelocityAndSpeed>)>>,
@@ -58,9 +63,24 @@ impl InstantVelocities {
     pub(super) fn new(cols: usize) -> Self {
         Self {
             source_hint: 0,
+            source_stretch: None,
             hint: 0,
             by_column: vec![None; cols],
         }
+    }
+
+    /// The velocity at `time_ns`, a source time: inside the last stretch
+    /// by its interpolation, else by [`PairMotion::velocity_near`] (the same
+    /// value either way).
+    #[inline]
+    fn source(&mut self, motion: &PairMotion, time_ns: StampNs) -> Option<nalgebra::Vector3<f64>> {
+        if let Some(velocity) = self.source_stretch.and_then(|s| s.at(time_ns)) {
+            return Some(velocity);
+        }
+        let series = motion.velocity.as_ref()?;
+        let velocity = series.at_near(time_ns, &mut self.source_hint);
+        self.source_stretch = series.interpolation_around(self.source_hint);
+        velocity
     }
 
     /// The velocity and speed at `time_ns`, a current return's time in
