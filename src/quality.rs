@@ -19,6 +19,9 @@ use serde::{Deserialize, Serialize};
 use crate::engine::{PairLooming, ThreatLevel, mask};
 use crate::model::Scan;
 use crate::objects::ground::GroundFit;
+// An `f64` as an integer that orders as `f64::total_cmp` does, and back
+// (the objects' selections use the same keys).
+use crate::objects::order::{key as total_order_key, value as from_total_order_key};
 
 /// Why occupied cells are masked: cells per `engine::mask` bit (a cell may
 /// carry several bits; empty cells are not counted).
@@ -389,18 +392,6 @@ fn median_of_keys(keys: &mut [i64]) -> Option<f64> {
     }
     let lower = keys[..n / 2].iter().copied().max().expect("n >= 2");
     Some(0.5 * (from_total_order_key(lower) + upper))
-}
-
-/// An `f64`'s bits as an integer that orders as `f64::total_cmp` does
-/// (negative values' magnitude bits flipped).
-fn total_order_key(value: f64) -> i64 {
-    let bits = value.to_bits() as i64;
-    bits ^ (((bits >> 63) as u64) >> 1) as i64
-}
-
-/// The inverse of [`total_order_key`] (the flip is its own inverse).
-fn from_total_order_key(key: i64) -> f64 {
-    f64::from_bits((key ^ (((key >> 63) as u64) >> 1) as i64) as u64)
 }
 
 impl PairQuality {
