@@ -137,17 +137,41 @@ impl ColumnRows {
         let azimuth_rad = &table.azimuth_rad[column.clone()];
         let elevation_rad = &table.elevation_rad[column.clone()];
         let range_m = &table.range_m[column];
-        let mut live = 0;
-        for row in 0..rows {
-            for (axis, value) in self.point.iter_mut().zip([px[row], py[row], pz[row]]) {
-                axis[live] = value;
+        // The worker's arrays as slices, cut to the column's rows: no
+        // bounds check, and no reload of their pointers after each store.
+        let [x, y, z] = &mut self.point;
+        let (x, y, z) = (&mut x[..rows], &mut y[..rows], &mut z[..rows]);
+        let (row_of, time) = (&mut self.row[..rows], &mut self.time_ns[..rows]);
+        let (azimuth, elevation) = (
+            &mut self.source_azimuth_rad[..rows],
+            &mut self.source_elevation_rad[..rows],
+        );
+        let live = if range_m.iter().all(|r| r.is_finite()) {
+            // Every row has a return (most columns): copied whole.
+            for (dst, src) in [(&mut *x, px), (&mut *y, py), (&mut *z, pz)] {
+                dst.copy_from_slice(src);
             }
-            self.row[live] = row;
-            self.time_ns[live] = time_ns[row];
-            self.source_azimuth_rad[live] = azimuth_rad[row];
-            self.source_elevation_rad[live] = elevation_rad[row];
-            live += usize::from(range_m[row].is_finite());
-        }
+            time.copy_from_slice(time_ns);
+            azimuth.copy_from_slice(azimuth_rad);
+            elevation.copy_from_slice(elevation_rad);
+            for (row, at) in row_of.iter_mut().enumerate() {
+                *at = row;
+            }
+            rows
+        } else {
+            let mut live = 0;
+            for row in 0..rows {
+                // `live <= row < rows`: the index is always in bounds.
+                let at = live.min(rows - 1);
+                (x[at], y[at], z[at]) = (px[row], py[row], pz[row]);
+                row_of[at] = row;
+                time[at] = time_ns[row];
+                azimuth[at] = azimuth_rad[row];
+                elevation[at] = elevation_rad[row];
+                live += usize::from(range_m[row].is_finite());
+            }
+            live
+        };
         self.live = live;
         self.landing[..live].fill(Landing::Seen);
     }
@@ -276,59 +300,65 @@ impl ColumnRows {
         normals: &mut [Vector3<f64>],
     ) {
         let offset_ns = warp.scan_offset_ns;
+        let live = self.live;
+        // Every array as a slice cut to the returns: no bounds check, and
+        // no reload of their pointers after each store.
+        let [px, py, pz] = &self.point;
+        let (px, py, pz) = (&px[..live], &py[..live], &pz[..live]);
+        let [mx, my, mz] = &mut self.moved;
+        let (mx, my, mz) = (&mut mx[..live], &mut my[..live], &mut mz[..live]);
+        let [lx, ly, lz] = &mut self.landed;
+        let (lx, ly, lz) = (&mut lx[..live], &mut ly[..live], &mut lz[..live]);
+        let (time_ns, rows) = (&self.time_ns[..live], &self.row[..live]);
+        let (landing, cols) = (&mut self.landing[..live], &mut self.col[..live]);
+        let source_azimuth = &self.source_azimuth_rad[..live];
+        let azimuth = &mut self.azimuth_rad[..live];
         // The last landing column's transform, where the returns share
         // their time (the cache's for that column: neighbouring rows land
         // in the same column).
         let mut last: Option<(usize, Moving)> = None;
-        for at in 0..self.live {
-            let measured_ns = self.time_ns[at];
+        for at in 0..live {
+            let measured_ns = time_ns[at];
             let seen_ns = measured_ns + offset_ns;
+            let point = Point3::new(px[at], py[at], pz[at]);
             let mut transform = match shared {
                 Some(transform) => transform,
                 None => {
+                    // `first_moves` and `azimuths` for this return.
                     let transform = cache.until(measured_ns, seen_ns);
-                    self.first_move(at, &transform, warp.geometry);
+                    let moved = transform.apply(&point);
+                    (mx[at], my[at], mz[at]) = (moved.x, moved.y, moved.z);
+                    azimuth[at] =
+                        source_azimuth[at] + turn_rad((point.x, point.y), (moved.x, moved.y));
+                    cols[at] = warp.geometry.col_of(azimuth[at]);
                     transform
                 }
             };
-            let column_ns = warp.target.column_time_ns[self.col[at]];
+            let landing_col = cols[at];
+            let column_ns = warp.target.column_time_ns[landing_col];
             if column_ns != StampNs::MIN && column_ns != seen_ns {
                 // A return that lands across the seam of the sweep would be
                 // compared with one fired a whole period earlier or later:
                 // no difference there.
                 if (column_ns - seen_ns).abs() > offset_ns.abs() / 4 {
-                    self.landing[at] = Landing::None;
+                    landing[at] = Landing::None;
                     continue;
                 }
-                let landing_col = self.col[at];
                 transform = match last {
                     Some((last_col, transform)) if !LINES && last_col == landing_col => transform,
                     _ => cache.until_column(measured_ns, landing_col),
                 };
                 last = Some((landing_col, transform));
-                let landed = transform.apply(&self.point_at(at));
-                for (axis, value) in self.landed.iter_mut().zip(landed.iter()) {
-                    axis[at] = *value;
-                }
-                self.landing[at] = Landing::Column;
+                let landed = transform.apply(&point);
+                (lx[at], ly[at], lz[at]) = (landed.x, landed.y, landed.z);
+                landing[at] = Landing::Column;
             }
-            if let Some(normal) = normals.get_mut(self.row[at]) {
-                let n = warp.source.surfaces.normal[self.row[at] * warp.geometry.cols + col];
+            if let Some(normal) = normals.get_mut(rows[at]) {
+                let n = warp.source.surfaces.normal[rows[at] * warp.geometry.cols + col];
                 let n = Vector3::new(f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
                 *normal = transform.rotate(&n);
             }
         }
-    }
-
-    /// Return `at` moved by `transform`, its azimuth turned and its
-    /// landing column: as `first_moves` and `azimuths` for one.
-    fn first_move(&mut self, at: usize, transform: &Moving, geometry: &ImageGeometry) {
-        let point = self.point_at(at);
-        let moved = transform.apply(&point);
-        self.set_moved(at, &moved);
-        self.azimuth_rad[at] =
-            self.source_azimuth_rad[at] + turn_rad((point.x, point.y), (moved.x, moved.y));
-        self.col[at] = geometry.col_of(self.azimuth_rad[at]);
     }
 
     /// The returns moved again turned on from their first landing: a turn
