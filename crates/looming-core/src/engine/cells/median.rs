@@ -34,34 +34,50 @@ pub(super) fn median_of(values: &[f32]) -> f32 {
 
 /// The 25 comparators of a sorting network for nine keys, seven layers
 /// (Dobbelaere's list of sorting networks; checked on every 0-1 input,
-/// which by the 0-1 principle sorts every input).
-const NINE_KEY_NETWORK: [(usize, usize); 25] = [
-    (0, 3),
-    (1, 7),
-    (2, 5),
-    (4, 8),
-    (0, 7),
-    (2, 4),
-    (3, 8),
-    (5, 6),
-    (0, 2),
-    (1, 3),
-    (4, 5),
-    (7, 8),
-    (1, 4),
-    (3, 6),
-    (5, 7),
-    (0, 1),
-    (2, 4),
-    (3, 5),
-    (6, 8),
-    (2, 3),
-    (4, 5),
-    (6, 7),
-    (1, 2),
-    (3, 4),
-    (5, 6),
-];
+/// which by the 0-1 principle sorts every input), written once and handed
+/// to `$then!` (a macro taking them as a list): the table and the lanes'
+/// written-out network alike.
+macro_rules! nine_key_network {
+    ($then:ident) => {
+        $then!(
+            (0, 3),
+            (1, 7),
+            (2, 5),
+            (4, 8),
+            (0, 7),
+            (2, 4),
+            (3, 8),
+            (5, 6),
+            (0, 2),
+            (1, 3),
+            (4, 5),
+            (7, 8),
+            (1, 4),
+            (3, 6),
+            (5, 7),
+            (0, 1),
+            (2, 4),
+            (3, 5),
+            (6, 8),
+            (2, 3),
+            (4, 5),
+            (6, 7),
+            (1, 2),
+            (3, 4),
+            (5, 6)
+        )
+    };
+}
+
+/// A list of comparators as an array.
+macro_rules! comparator_table {
+    ($(($i:literal, $j:literal)),* $(,)?) => {
+        [$(($i, $j)),*]
+    };
+}
+
+/// The network as a table.
+const NINE_KEY_NETWORK: [(usize, usize); 25] = nine_key_network!(comparator_table);
 
 /// Sorts nine keys with [`NINE_KEY_NETWORK`].
 #[inline]
@@ -154,35 +170,7 @@ fn sort_nine_lanes(keys: &mut [[i32; LANES]; 9]) {
             )*
         };
     }
-    // NINE_KEY_NETWORK, comparator for comparator (a test holds them
-    // equal).
-    network!(
-        (0, 3),
-        (1, 7),
-        (2, 5),
-        (4, 8),
-        (0, 7),
-        (2, 4),
-        (3, 8),
-        (5, 6),
-        (0, 2),
-        (1, 3),
-        (4, 5),
-        (7, 8),
-        (1, 4),
-        (3, 6),
-        (5, 7),
-        (0, 1),
-        (2, 4),
-        (3, 5),
-        (6, 8),
-        (2, 3),
-        (4, 5),
-        (6, 7),
-        (1, 2),
-        (3, 4),
-        (5, 6),
-    );
+    nine_key_network!(network);
 }
 
 /// An `f32`'s bits as an integer that orders as `f32::total_cmp` does
