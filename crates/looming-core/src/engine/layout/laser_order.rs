@@ -4,8 +4,10 @@
 
 use std::f64::consts::PI;
 
+use rayon::prelude::*;
+
 use super::{
-    Sweep, azimuth_turn, circular_mean_turn, elevation, median, rotation_of_step, wrap_turn,
+    Sweep, azimuth_turns, circular_mean_turn, elevation, median, rotation_of_step, wrap_turn,
 };
 
 /// Rings recovered from the laser-by-laser order.
@@ -15,6 +17,9 @@ pub struct LaserOrder {
     pub rings: Vec<u16>,
     pub ring_count: usize,
     pub sweep: Sweep,
+    /// Azimuth of every point, turns (`atan2(y, x) / 2 pi`; `None`
+    /// without one), for the times along the sweep.
+    pub turns: Vec<Option<f64>>,
 }
 
 /// A ring with fewer than 1/20 of the mean points per ring is a spurious
@@ -62,7 +67,7 @@ pub fn laser_order(
     points: &[[f32; 3]],
     counts: std::ops::RangeInclusive<usize>,
 ) -> Option<LaserOrder> {
-    let turns: Vec<Option<f64>> = points.iter().map(azimuth_turn).collect();
+    let turns = azimuth_turns(points);
     let valid: Vec<(usize, f64)> = turns
         .iter()
         .enumerate()
@@ -77,7 +82,10 @@ pub fn laser_order(
         .collect();
     let direction = rotation_of_step(median(&mut steps)?)?;
     let sign = direction.sign();
-    let elevations: Vec<f64> = valid.iter().map(|&(i, _)| elevation(&points[i])).collect();
+    let elevations: Vec<f64> = valid
+        .par_iter()
+        .map(|&(i, _)| elevation(&points[i]))
+        .collect();
     // Position along the sweep direction from a reference azimuth, [0, 1).
     let along = |reference: f64| -> Vec<f64> {
         valid
@@ -134,6 +142,7 @@ pub fn laser_order(
             direction,
             seam_turn: seam_turn.rem_euclid(1.0),
         },
+        turns,
     })
 }
 

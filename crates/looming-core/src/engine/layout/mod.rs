@@ -25,6 +25,8 @@ mod organized;
 
 use std::f64::consts::TAU;
 
+use rayon::prelude::*;
+
 use crate::model::{RingSource, Rotation, Scan, TimeSource};
 
 pub use elevation_clusters::elevation_rings;
@@ -63,10 +65,25 @@ pub fn complete(scan: &mut Scan, period_s: f64) {
     }
 }
 
+/// A sweep the point order follows, with each point's azimuth (turns,
+/// [`azimuth_turn`]) where the recovery already took them: the times
+/// then reuse them (one `atan2` per point, not two: on KITTI's lists the
+/// azimuths were a third of the layout's time).
+struct FoundSweep {
+    sweep: Sweep,
+    turns: Option<Vec<Option<f64>>>,
+}
+
+impl From<Sweep> for FoundSweep {
+    fn from(sweep: Sweep) -> Self {
+        Self { sweep, turns: None }
+    }
+}
+
 /// Sets `scan.ring` and `scan.layout.rings` from the organized rows or the
 /// ring field the cloud carries, else recovers them from its points; returns
 /// the sweep when the point order follows one.
-fn fill_rings(scan: &mut Scan) -> Option<Sweep> {
+fn fill_rings(scan: &mut Scan) -> Option<FoundSweep> {
     let field_name = match &scan.layout.rings {
         RingSource::Field { name } => name.clone(),
         _ => "ring".to_owned(),
@@ -109,14 +126,17 @@ fn fill_rings(scan: &mut Scan) -> Option<Sweep> {
 /// Rings of a cloud that carries none, from the first recovery that applies
 /// (laser order, firing order, elevation clusters); returns the sweep when
 /// the point order follows one.
-fn recover_rings(scan: &mut Scan) -> Option<Sweep> {
-    let mut sweep: Option<Sweep> = None;
+fn recover_rings(scan: &mut Scan) -> Option<FoundSweep> {
+    let mut sweep: Option<FoundSweep> = None;
     if let Some(order) = laser_order(&scan.points_m, RING_COUNTS) {
         scan.ring = Some(order.rings);
         scan.layout.rings = RingSource::LaserOrder {
             direction: order.sweep.direction,
         };
-        sweep = Some(order.sweep);
+        sweep = Some(FoundSweep {
+            sweep: order.sweep,
+            turns: Some(order.turns),
+        });
     } else if let Some(firing) = firing_order(&scan.points_m, &scan.source_index) {
         // Without its empty returns (the driver removed them) a
         // cloud loses the period's phase at every dropout: its rings
@@ -132,13 +152,13 @@ fn recover_rings(scan: &mut Scan) -> Option<Sweep> {
             },
         };
         scan.ring = Some(by_elevation.unwrap_or(firing.rings));
-        sweep = Some(firing.sweep);
+        sweep = Some(firing.sweep.into());
     } else if let Some(rings) = elevation_rings(&scan.points_m) {
         scan.ring = Some(rings);
         scan.layout.rings = RingSource::Elevation;
         // A driver's cloud with its empty returns removed: no period
         // in the order, but the order still follows the sweep.
-        sweep = sweep_in_order(&scan.points_m);
+        sweep = sweep_in_order(&scan.points_m).map(FoundSweep::from);
     } else {
         scan.layout.rings = RingSource::None;
     }
@@ -147,15 +167,18 @@ fn recover_rings(scan: &mut Scan) -> Option<Sweep> {
 
 /// Sets `scan.time_offset_s` from the azimuth along the sweep, or records
 /// that the stamp is all there is.
-fn fill_times(scan: &mut Scan, sweep: Option<Sweep>, period_s: f64) {
+fn fill_times(scan: &mut Scan, sweep: Option<FoundSweep>, period_s: f64) {
     match sweep {
-        Some(sweep) => {
-            scan.time_offset_s = Some(
-                scan.points_m
-                    .iter()
-                    .map(|p| (sweep.fraction(p) * period_s) as f32)
+        Some(FoundSweep { sweep, turns }) => {
+            let time_s = |turn: Option<f64>| (sweep.fraction_of_turn(turn) * period_s) as f32;
+            scan.time_offset_s = Some(match turns {
+                Some(turns) => turns.into_par_iter().map(time_s).collect(),
+                None => scan
+                    .points_m
+                    .par_iter()
+                    .map(|p| time_s(azimuth_turn(p)))
                     .collect(),
-            );
+            });
             scan.layout.times = TimeSource::Azimuth {
                 direction: sweep.direction,
                 seam_deg: sweep.seam_turn.rem_euclid(1.0) * 360.0,
@@ -191,11 +214,23 @@ impl Sweep {
     /// Fraction of the sweep, in [0, 1), at which the point was fired; 0 for
     /// a point without an azimuth.
     pub fn fraction(&self, p: &[f32; 3]) -> f64 {
-        match azimuth_turn(p) {
+        self.fraction_of_turn(azimuth_turn(p))
+    }
+
+    /// [`Sweep::fraction`] of a point whose azimuth is `turn` (turns,
+    /// [`azimuth_turn`]).
+    fn fraction_of_turn(&self, turn: Option<f64>) -> f64 {
+        match turn {
             Some(a) => (self.direction.sign() * (a - self.seam_turn)).rem_euclid(1.0),
             None => 0.0,
         }
     }
+}
+
+/// [`azimuth_turn`] of every point, on rayon's workers (the layout runs on
+/// the pairing thread, between the engine's pairs: both cores are free).
+fn azimuth_turns(points: &[[f32; 3]]) -> Vec<Option<f64>> {
+    points.par_iter().map(azimuth_turn).collect()
 }
 
 /// Azimuth `atan2(y, x)` in turns, `None` for a point without one.

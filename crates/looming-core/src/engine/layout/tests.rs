@@ -151,6 +151,16 @@ fn laser_order_both_directions() {
         );
         let times = scan.time_offset_s.as_deref().expect("times");
         assert!(times.iter().all(|&t| (0.0..0.1).contains(&t)));
+        // The azimuths the recovery took, reused for the times: each
+        // point's time as its own azimuth gives it, to the bit.
+        let sweep = laser_order(&scan.points_m, RING_COUNTS)
+            .expect("a laser order")
+            .sweep;
+        let recomputed = scan
+            .points_m
+            .iter()
+            .map(|p| ((sweep.fraction(p) * 0.1) as f32).to_bits());
+        assert!(recomputed.eq(times.iter().map(|t| t.to_bits())));
         // Along a laser the time rises but for the few points fired
         // before the common seam.
         let rises = times
