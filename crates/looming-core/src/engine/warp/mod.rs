@@ -16,6 +16,7 @@ mod mesh;
 mod moved_column;
 mod moved_vertices;
 mod raster;
+mod recurring;
 mod source_columns;
 
 use nalgebra::{Point3, Vector3};

@@ -18,6 +18,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use super::moved_vertices::{
     Moving, TransformCache, cross_dot, series_rad, slight, slight_series_rad, small, turn_rad,
 };
+use super::recurring::{ExactTimes, recurring};
 use super::{Source, Target, Vertex};
 use crate::engine::atan::atan2;
 use crate::engine::grid::{ImageGeometry, between_beams};
@@ -73,6 +74,8 @@ pub(super) struct ColumnRows {
     row_f: Vec<f64>,
     /// Turns past the series' reach, taken again by `atan2`.
     far: Vec<bool>,
+    /// The transforms of a column of a few recurring times.
+    exact: ExactTimes,
 }
 
 impl ColumnWarp<'_, '_> {
@@ -87,6 +90,13 @@ impl ColumnWarp<'_, '_> {
     ) {
         rows.gather(self.source, column.len(), col);
         let mut cache = TransformCache::<LINES>::new(self.trajectory, self.arrivals);
+        // A few times recurring along the column: each one's transforms
+        // exact, composed once (`recurring.rs`).
+        if LINES && recurring(&rows.time_ns[..rows.live]) {
+            let mut exact = std::mem::take(&mut rows.exact);
+            exact.clear();
+            cache.exact = Some(exact);
+        }
         if rows.live > 0 {
             // Returns sharing a time share their first transform: their
             // first moves and azimuths come before the cache's lookups of
@@ -111,6 +121,9 @@ impl ColumnWarp<'_, '_> {
                 &rows.row[..live],
                 &mut rows.row_f[..live],
             );
+        }
+        if let Some(exact) = cache.exact.take() {
+            rows.exact = exact;
         }
         rows.write(self.geometry, column);
     }

@@ -6,6 +6,7 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rayon::prelude::*;
 
+use super::recurring::ExactTimes;
 use crate::engine::trajectory::Trajectory;
 use crate::model::StampNs;
 
@@ -41,7 +42,7 @@ pub(super) struct Moving {
 }
 
 impl Moving {
-    fn new(isometry: Isometry3<f64>) -> Self {
+    pub(super) fn new(isometry: Isometry3<f64>) -> Self {
         Self {
             rotation: *isometry.rotation.to_rotation_matrix().matrix(),
             translation: isometry.translation.vector,
@@ -91,6 +92,9 @@ pub(super) struct TransformCache<'a, const LINES: bool> {
     to_time_line: Option<(StampNs, Sloped)>,
     to_column_lines: [Option<(usize, Sloped)>; 4],
     next_line: usize,
+    /// A column of a few recurring times' exact transforms, where it is
+    /// one (`recurring.rs`): then neither lines nor the caches above.
+    pub(super) exact: Option<ExactTimes>,
 }
 
 impl<'a, const LINES: bool> TransformCache<'a, LINES> {
@@ -105,11 +109,15 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
             to_time_line: None,
             to_column_lines: [None; 4],
             next_line: 0,
+            exact: None,
         }
     }
 
     /// Points measured at `from_ns` into the frame at `to_ns`.
     pub(super) fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Moving {
+        if let Some(exact) = &mut self.exact {
+            return exact.until(self.trajectory, from_ns, to_ns - from_ns);
+        }
         if let Some((key, transform)) = self.to_time
             && key == (from_ns, to_ns)
         {
@@ -144,6 +152,9 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
     /// Points measured at `from_ns` into the frame target column `col`
     /// fired in.
     pub(super) fn until_column(&mut self, from_ns: StampNs, col: usize) -> Moving {
+        if let Some(exact) = &mut self.exact {
+            return exact.until_column(self.trajectory, (from_ns, col), &self.arrivals[col]);
+        }
         let key = (from_ns, col);
         if let Some((_, transform)) = self.to_columns.iter().flatten().find(|(k, _)| *k == key) {
             return *transform;
@@ -411,6 +422,37 @@ mod tests {
                     "k {k} col {col}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn a_few_recurring_times_get_the_trajectorys_relative_transforms_bit_for_bit() {
+        let (trajectory, column_time_ns, previous_ns) = turning_drive();
+        let arrivals = arrival_poses(&column_time_ns, &trajectory);
+        let mut cache = TransformCache::<true>::new(&trajectory, &arrivals);
+        cache.exact = Some(ExactTimes::default());
+        let same = |a: Moving, b: Isometry3<f64>| {
+            let b = Moving::new(b);
+            a.translation
+                .iter()
+                .zip(b.translation.iter())
+                .chain(a.rotation.iter().zip(b.rotation.iter()))
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        // A Pandar64's column: six times 0.66 ms apart, cycling row by
+        // row, landing in neighbouring target columns (more of them than
+        // the column cache keeps).
+        let times = [1_662_000, 2_326_000, 2_991_000, 0, 663_000, 1_328_000];
+        let offset_ns = 100_000_000;
+        for k in 0..64usize {
+            let from_ns = previous_ns + times[k % 6];
+            assert!(same(
+                cache.until(from_ns, from_ns + offset_ns),
+                trajectory.relative(from_ns, from_ns + offset_ns)
+            ));
+            let col = 20 + k % 5;
+            let expected = trajectory.relative(from_ns, column_time_ns[col]);
+            assert!(same(cache.until_column(from_ns, col), expected), "k {k}");
         }
     }
 
