@@ -7,7 +7,8 @@
 //! Here the render and its z-buffer; the source's fields column-major,
 //! once per pair, in `source_columns.rs`; the vertices moved column by
 //! column in `moved_column.rs` (the transform cache and the turns in
-//! `moved_vertices.rs`), the mesh's joins and bridged dropouts in `mesh.rs`,
+//! `moved_vertices.rs`, a column of a few recurring times' exact
+//! transforms in `recurring.rs`), the mesh's joins and bridged dropouts in `mesh.rs`,
 //! the rasterisation in `raster.rs` (its common case in `full_quad.rs`).
 
 mod flat_triangle;
