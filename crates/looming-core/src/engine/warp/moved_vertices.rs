@@ -392,19 +392,21 @@ mod tests {
         (trajectory, column_time_ns, previous_ns)
     }
 
+    /// Whether `a` holds `b`'s matrix and translation to the bit.
+    fn same(a: Moving, b: Isometry3<f64>) -> bool {
+        let b = Moving::new(b);
+        a.translation
+            .iter()
+            .zip(b.translation.iter())
+            .chain(a.rotation.iter().zip(b.rotation.iter()))
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
     #[test]
     fn cached_transforms_are_the_trajectorys_relative_ones_bit_for_bit() {
         let (trajectory, column_time_ns, previous_ns) = turning_drive();
         let arrivals = arrival_poses(&column_time_ns, &trajectory);
         let mut cache = TransformCache::<true>::new(&trajectory, &arrivals);
-        let same = |a: Moving, b: Isometry3<f64>| {
-            let b = Moving::new(b);
-            a.translation
-                .iter()
-                .zip(b.translation.iter())
-                .chain(a.rotation.iter().zip(b.rotation.iter()))
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        };
         // Departures repeating and changing, arrivals in columns and at
         // times, the column cache wrapping round.
         for k in 0..400i64 {
@@ -431,14 +433,6 @@ mod tests {
         let arrivals = arrival_poses(&column_time_ns, &trajectory);
         let mut cache = TransformCache::<true>::new(&trajectory, &arrivals);
         cache.exact = Some(ExactTimes::default());
-        let same = |a: Moving, b: Isometry3<f64>| {
-            let b = Moving::new(b);
-            a.translation
-                .iter()
-                .zip(b.translation.iter())
-                .chain(a.rotation.iter().zip(b.rotation.iter()))
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        };
         // A Pandar64's column: six times 0.66 ms apart, cycling row by
         // row, landing in neighbouring target columns (more of them than
         // the column cache keeps).

@@ -63,13 +63,11 @@ impl ExactTimes {
 
     /// `pose(from_ns)`, kept by time.
     fn departure(&mut self, trajectory: &Trajectory, from_ns: StampNs) -> Isometry3<f64> {
-        if let Some(&(_, pose)) = self.departures.iter().find(|(t, _)| *t == from_ns) {
+        if let Some(pose) = kept(&self.departures, from_ns) {
             return pose;
         }
         let pose = trajectory.pose(from_ns);
-        if self.departures.len() < MAX_TIMES {
-            self.departures.push((from_ns, pose));
-        }
+        keep(&mut self.departures, (from_ns, pose));
         pose
     }
 
@@ -82,15 +80,13 @@ impl ExactTimes {
         from_ns: StampNs,
         offset_ns: StampNs,
     ) -> Moving {
-        if let Some(&(_, transform)) = self.until.iter().find(|(t, _)| *t == from_ns) {
+        if let Some(transform) = kept(&self.until, from_ns) {
             return transform;
         }
         let transform = Moving::new(
             trajectory.pose(from_ns + offset_ns).inverse() * self.departure(trajectory, from_ns),
         );
-        if self.until.len() < MAX_TIMES {
-            self.until.push((from_ns, transform));
-        }
+        keep(&mut self.until, (from_ns, transform));
         transform
     }
 
@@ -103,7 +99,7 @@ impl ExactTimes {
         arrival: &Isometry3<f64>,
     ) -> Moving {
         let key = (from_ns, col);
-        if let Some(&(_, transform)) = self.columns.iter().find(|(k, _)| *k == key) {
+        if let Some(transform) = kept(&self.columns, key) {
             return transform;
         }
         let transform = Moving::new(arrival * self.departure(trajectory, from_ns));
@@ -114,6 +110,21 @@ impl ExactTimes {
             self.next_column = (self.next_column + 1) % COLUMN_SLOTS;
         }
         transform
+    }
+}
+
+/// The value kept under `key` in `list`, if any.
+fn kept<K: PartialEq, V: Copy>(list: &[(K, V)], key: K) -> Option<V> {
+    list.iter()
+        .find(|(k, _)| *k == key)
+        .map(|&(_, value)| value)
+}
+
+/// `entry` kept in `list` while it has room for one of each of a column's
+/// [`MAX_TIMES`] times (a column of more is not recurring).
+fn keep<K, V>(list: &mut Vec<(K, V)>, entry: (K, V)) {
+    if list.len() < MAX_TIMES {
+        list.push(entry);
     }
 }
 
