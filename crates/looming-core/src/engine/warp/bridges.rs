@@ -64,6 +64,15 @@ impl BridgedMesh {
             });
         Self { proxy, bits }
     }
+
+    /// The plan's bits of the quad of cells `quad` (top left, top right,
+    /// bottom left, bottom right) where a render's vertices (`proxy`) of
+    /// all four stand for the cells planned.
+    #[inline]
+    pub fn bits_where_planned(&self, proxy: &[u32], quad: [usize; 4]) -> Option<u8> {
+        let planned = |x: usize| self.proxy.get(x) == Some(&proxy[x]);
+        quad.into_iter().all(planned).then(|| self.bits[quad[0]])
+    }
 }
 
 /// [`fill_dropouts`](super::mesh::fill_dropouts)'s bridges of one row

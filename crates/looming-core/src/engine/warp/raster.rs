@@ -108,22 +108,20 @@ fn rasterize_quad_at(
         return;
     };
     let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
-    // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
     // A quad of a row bridged otherwise than planned whose own vertices
     // stand for the cells planned (all but those near the difference):
-    // the plan's bits.
-    let planned = &source.bridged;
-    let (c, d) = (a + cols, a - col + next + cols);
-    let as_planned = || {
-        [a, a - col + next, c, d]
-            .into_iter()
-            .all(|x| proxies.cell[x] == planned.proxy[x])
-    };
+    // the plan's bits. (Bits from the caller: it tried the whole quad.)
     let (bits, whole_tried) = match bits {
         Some(bits) => (Some(bits), true),
-        None if !planned.bits.is_empty() && as_planned() => (Some(planned.bits[a]), false),
-        None => (None, false),
+        None => {
+            let (b, c) = (a - col + next, a + cols);
+            let planned = source
+                .bridged
+                .bits_where_planned(&proxies.cell, [a, b, c, b + cols]);
+            (planned, false)
+        }
     };
+    // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
     let quad = if let Some(bits) = bits {
         [
             va.filter(|_| bits & QUAD_FIRST != 0)
