@@ -25,24 +25,33 @@ pub(super) fn fill_dropouts(
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
     let mut bridged_row = vec![false; rows];
     let sparse = !vertices.normal.is_empty();
-    // Row by row (each left to right: a bridged vertex may be the left end
-    // of the next bridge; rows share nothing), so that the source's ranges
-    // are read in their order and the vertices only at its dropouts.
-    for (row, bridged) in bridged_row.iter_mut().enumerate() {
-        for col in 0..cols {
-            let cell = row * cols + col;
+    // Column by column, each column's rows in turn: every row is still
+    // taken left to right (a bridged vertex may be the left end of the
+    // next bridge; rows share nothing), and the dropouts' vertices and
+    // their neighbours' are read from three neighbouring columns of the
+    // column-major buffers, where row by row each dropout's lay a column
+    // (3 KiB at 64 rows) from the last one's.
+    let range_cols = &source.columns.range_m;
+    for col in 0..cols {
+        let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+        for (row, bridged) in bridged_row.iter_mut().enumerate() {
             let at = col * rows + row;
-            if source.surfaces.range_m[cell].is_finite() || vertices.at[at].is_some() {
+            if range_cols[at].is_finite() || vertices.at[at].is_some() {
                 continue;
             }
-            let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+            let cell = row * cols + col;
             let (left, right) = (row * cols + left_col, row * cols + right_col);
             let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
             let (Some(a), Some(b)) = (vertices.at[left_at].some(), vertices.at[right_at].some())
             else {
                 continue;
             };
-            if !same_surface(source.surfaces, left, right) || (a.col - b.col).abs() > 3.0 {
+            // The source's plan bridged this dropout between these two
+            // cells only where they lie on one surface (`BridgedMesh`).
+            let planned = source.bridged.proxy.get(cell) == Some(&(left as u32));
+            if (a.col - b.col).abs() > 3.0
+                || !(planned || same_surface(source.surfaces, left, right))
+            {
                 continue;
             }
             vertices.at[at] = Vertex {
@@ -58,9 +67,19 @@ pub(super) fn fill_dropouts(
             *bridged = true;
         }
     }
+    // Rows bridged as the source planned (most), whose quads take the
+    // plan's table (`BridgedMesh`).
+    let planned = &source.bridged.proxy;
+    let as_planned = (0..rows)
+        .map(|row| {
+            let at = row * cols..(row + 1) * cols;
+            planned.get(at.clone()) == Some(&proxy[at])
+        })
+        .collect();
     Proxies {
         cell: proxy,
         bridged_row,
+        as_planned,
     }
 }
 
@@ -71,6 +90,10 @@ pub(super) struct Proxies {
     /// Per row, whether any of its vertices stands for another cell: where
     /// none of a quad's does, the scan's own table (`mesh_joins`) holds.
     pub bridged_row: Vec<bool>,
+    /// Per row, whether its vertices stand for the cells the source
+    /// planned (`BridgedMesh::proxy`): where both rows of a quad's do, the
+    /// plan's triangle bits hold.
+    pub as_planned: Vec<bool>,
 }
 
 /// Which neighbours each cell shares a surface with (`same_surface`), for
@@ -203,7 +226,7 @@ pub(super) const EDGE_SECOND: u8 = 64;
 /// stand for, judged now.
 #[inline]
 pub(super) fn on_one_surface(
-    source: &Source,
+    surfaces: &Surfaces,
     proxy: &[u32],
     (x, y): (usize, usize),
     joined: bool,
@@ -212,13 +235,13 @@ pub(super) fn on_one_surface(
     if px == x && py == y {
         joined
     } else {
-        px == py || same_surface(source.surfaces, px, py)
+        px == py || same_surface(surfaces, px, py)
     }
 }
 
 /// Whether two neighbouring source cells lie on one surface (so a triangle
 /// between them is real and not a bridge across an occlusion).
-fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
+pub(super) fn same_surface(s: &Surfaces, a: usize, b: usize) -> bool {
     on_one_plane(s, a, b, s.noise_m(a).max(s.noise_m(b)))
 }
 

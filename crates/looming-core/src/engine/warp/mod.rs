@@ -11,6 +11,7 @@
 //! transforms in `recurring.rs`), the mesh's joins and bridged dropouts in `mesh.rs`,
 //! the rasterisation in `raster.rs` (its common case in `full_quad.rs`).
 
+mod bridges;
 mod flat_triangle;
 mod full_quad;
 mod mesh;
@@ -28,6 +29,7 @@ use super::surface::Surfaces;
 use super::trajectory::Trajectory;
 use crate::model::StampNs;
 
+use bridges::BridgedMesh;
 use mesh::fill_dropouts;
 pub(super) use mesh::mesh_joins;
 use moved_column::{ColumnRows, ColumnWarp};
@@ -41,6 +43,9 @@ pub(crate) struct Source<'a> {
     /// The fields the warp reads, column-major (with each return's time),
     /// transposed once for every render of the pair.
     columns: SourceColumns,
+    /// Its dropouts as a render will most likely bridge them, and the
+    /// mesh's triangles then: decided once for every render of the pair.
+    bridged: BridgedMesh,
 }
 
 impl<'a> Source<'a> {
@@ -50,6 +55,7 @@ impl<'a> Source<'a> {
         Self {
             surfaces,
             columns: SourceColumns::of(surfaces, time_ns),
+            bridged: BridgedMesh::of(surfaces),
         }
     }
 }

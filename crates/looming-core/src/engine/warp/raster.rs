@@ -31,10 +31,23 @@ pub(super) fn rasterize_columns(
     // About one candidate per quad: room for all without regrowing.
     let quads = columns.len() * rows.saturating_sub(1);
     let mut out = Vec::with_capacity(quads + quads / 2);
-    // Where neither row bridged a dropout, every vertex stands for its own
-    // cell and the scan's table of triangles holds.
-    let own: Vec<bool> = (0..rows.saturating_sub(1))
-        .map(|row| !proxies.bridged_row[row] && !proxies.bridged_row[row + 1])
+    // Per pair of rows, the table of triangles that holds for all its
+    // quads, if one does: the source's plan of its bridges where both rows
+    // were bridged as planned (`BridgedMesh`: most of KITTI's), else the
+    // scan's own where neither row bridged a dropout (every vertex stands
+    // for its own cell); `None` where each quad is judged on its own.
+    let planned = &source.bridged.bits;
+    let tables: Vec<Option<&[u8]>> = (0..rows.saturating_sub(1))
+        .map(|row| {
+            let (here, below) = (row, row + 1);
+            if proxies.as_planned[here] && proxies.as_planned[below] {
+                Some(planned.as_slice())
+            } else if !proxies.bridged_row[here] && !proxies.bridged_row[below] {
+                Some(source.surfaces.joins.as_slice())
+            } else {
+                None
+            }
+        })
         .collect();
     let whole = WholeQuads::of(target, geometry);
     let joins = &source.surfaces.joins;
@@ -43,8 +56,11 @@ pub(super) fn rasterize_columns(
         // The quads' left and right vertices, each column's rows in order.
         let left = &vertices.at[col * rows..(col + 1) * rows];
         let right = &vertices.at[next * rows..(next + 1) * rows];
-        for (row, &own) in own.iter().enumerate() {
-            let bits = joins[row * cols + col];
+        for (row, &table) in tables.iter().enumerate() {
+            let (own, bits) = match table {
+                Some(table) => (true, table[row * cols + col]),
+                None => (false, joins[row * cols + col]),
+            };
             if own && bits & (QUAD_FIRST | QUAD_SECOND) == 0 {
                 continue;
             }
@@ -60,7 +76,7 @@ pub(super) fn rasterize_columns(
                 geometry,
                 (vertices, proxies),
                 (row, col),
-                own,
+                own.then_some(bits),
                 &mut out,
             );
         }
@@ -70,8 +86,10 @@ pub(super) fn rasterize_columns(
 
 /// The quad at source (`row`, `col`) rasterised into `out`, where it is
 /// not a whole quad ([`WholeQuads`]: one in twenty on a dense sensor);
-/// `own` where neither of its rows bridged a dropout. (Out of line: the
-/// whole quads' loop keeps its values in registers.)
+/// `bits` its triangles' bits where a table holds them (`mesh_joins`'),
+/// `None` where a vertex stands for a bridged dropout the source did not
+/// plan. (Out of line: the whole quads' loop keeps its values in
+/// registers.)
 #[inline(never)]
 fn rasterize_quad_at(
     source: &Source,
@@ -79,11 +97,10 @@ fn rasterize_quad_at(
     geometry: &ImageGeometry,
     (vertices, proxies): (&Vertices, &Proxies),
     (row, col): (usize, usize),
-    own: bool,
+    bits: Option<u8>,
     out: &mut Vec<Candidate>,
 ) {
     let cols = geometry.cols;
-    let joins = &source.surfaces.joins;
     let a = row * cols + col;
     let next = if col + 1 == cols { 0 } else { col + 1 };
     // Either triangle needs the diagonal's two vertices.
@@ -91,9 +108,21 @@ fn rasterize_quad_at(
         return;
     };
     let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
+    // A quad of a row bridged otherwise than planned whose own vertices
+    // stand for the cells planned (all but those near the difference):
+    // the plan's bits. (Bits from the caller: it tried the whole quad.)
+    let (bits, whole_tried) = match bits {
+        Some(bits) => (Some(bits), true),
+        None => {
+            let (b, c) = (a - col + next, a + cols);
+            let planned = source
+                .bridged
+                .bits_where_planned(&proxies.cell, [a, b, c, b + cols]);
+            (planned, false)
+        }
+    };
     // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
-    let quad = if own {
-        let bits = joins[a];
+    let quad = if let Some(bits) = bits {
         [
             va.filter(|_| bits & QUAD_FIRST != 0)
                 .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
@@ -103,10 +132,10 @@ fn rasterize_quad_at(
     } else {
         bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
     };
-    // Both triangles across a bridged row (most of KITTI's quads): the
-    // whole quads' path where it takes them, the same candidates as
-    // `rasterize_quad`'s (the raster tests hold them to each other).
-    if let (false, [Some(([va, _, _], first)), Some(([_, vd, _], second))]) = (own, quad) {
+    // Both triangles across a bridged row judged here: the whole quads'
+    // path where it takes them, the same candidates as `rasterize_quad`'s
+    // (the raster tests hold them to each other).
+    if let (false, [Some(([va, _, _], first)), Some(([_, vd, _], second))]) = (whole_tried, quad) {
         let bits = if first { EDGE_FIRST } else { 0 } | if second { EDGE_SECOND } else { 0 };
         if whole.rasterize([va, vb, vc, vd], bits, out) {
             return;
@@ -125,7 +154,7 @@ fn rasterize_quad_at(
 /// cells the vertices stand for. Cells `a` and `b` (left and right, the
 /// next row's below them) and vertices `(a, b, c, d)`, the diagonal's `b`
 /// and `c` present (either triangle needs them).
-fn bridged_quad<'v>(
+pub(super) fn bridged_quad<'v>(
     source: &Source,
     proxy: &[u32],
     (a, b): (usize, usize),
@@ -169,7 +198,7 @@ fn bridged_quad<'v>(
         };
         if !edges
             .into_iter()
-            .all(|(x, y, joined)| on_one_surface(source, proxy, (x, y), joined))
+            .all(|(x, y, joined)| on_one_surface(source.surfaces, proxy, (x, y), joined))
         {
             continue;
         }
@@ -213,7 +242,7 @@ pub(super) fn rasterize_ring(
             vertices.normal[next * rows + row],
         );
         let joined = source.surfaces.joins[a] & JOIN_RIGHT != 0;
-        if !on_one_surface(source, proxy, (a, b), joined) {
+        if !on_one_surface(source.surfaces, proxy, (a, b), joined) {
             continue;
         }
         let (pa, pb) = (proxy[a] as usize, proxy[b] as usize);

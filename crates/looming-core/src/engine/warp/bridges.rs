@@ -1,0 +1,289 @@
+//! The source's dropouts as every render will most likely bridge them,
+//! decided once per pair: which cells [`fill_dropouts`] will fill, and the
+//! triangles of each quad then ([`BridgedMesh`]).
+//!
+//! A render bridges a dropout between two moved vertices that exist and
+//! land within three columns of each other: on a dense sensor, every
+//! return's vertex but at the seam of the sweep. The quads across a bridged
+//! row (most of KITTI's HDL-64E, whose dropout rows the mesh bridges) took
+//! their edges per quad and per render ([`bridged_quad`], five edge
+//! verdicts each), though all but the vertices' presence is the source's.
+//! A render whose rows' stand-ins (`Proxies::cell`) are these takes the
+//! table's bits as an unbridged quad takes the scan's own (`mesh_joins`);
+//! a row bridged otherwise (a vertex across the seam) is judged as before.
+//!
+//! [`fill_dropouts`]: super::mesh::fill_dropouts
+//! [`bridged_quad`]: super::raster
+
+use rayon::prelude::*;
+
+use super::mesh::{
+    EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, QUAD_FIRST, QUAD_SECOND,
+    on_one_surface, same_surface,
+};
+use crate::engine::surface::Surfaces;
+
+/// The source's mesh as a render bridges its dropouts where every return
+/// has its vertex and every bridge's ends land near each other.
+pub(crate) struct BridgedMesh {
+    /// Per cell, the cell whose surface its vertex stands for, as
+    /// [`fill_dropouts`](super::mesh::fill_dropouts) would set it.
+    pub proxy: Vec<u32>,
+    /// Per quad (its top-left cell), [`mesh_joins`](super::mesh_joins)'s
+    /// triangle bits ([`QUAD_FIRST`], [`QUAD_SECOND`], [`EDGE_FIRST`],
+    /// [`EDGE_SECOND`]) with the edges judged on the cells the vertices
+    /// stand for (`proxy`): the scan's own where none stands for another.
+    pub bits: Vec<u8>,
+}
+
+impl BridgedMesh {
+    /// The mesh of `surfaces` with its dropouts bridged.
+    pub fn of(surfaces: &Surfaces) -> Self {
+        let cols = surfaces.cols.max(1);
+        let rows = surfaces.range_m.len() / cols;
+        if surfaces.joins.len() != rows * cols {
+            // No table of joins to start from: every render judges its own.
+            return Self {
+                proxy: Vec::new(),
+                bits: Vec::new(),
+            };
+        }
+        let mut proxy: Vec<u32> = (0..(rows * cols) as u32).collect();
+        proxy
+            .par_chunks_mut(cols)
+            .enumerate()
+            .for_each(|(row, proxy_of_row)| bridge_row(surfaces, row, proxy_of_row));
+        let mut bits = vec![0; rows * cols];
+        bits.par_chunks_mut(cols)
+            .enumerate()
+            .take(rows.saturating_sub(1))
+            .for_each(|(row, bits_of_row)| {
+                for (col, bits) in bits_of_row.iter_mut().enumerate() {
+                    *bits = quad_bits(surfaces, &proxy, row * cols + col);
+                }
+            });
+        Self { proxy, bits }
+    }
+
+    /// The plan's bits of the quad of cells `quad` (top left, top right,
+    /// bottom left, bottom right) where a render's vertices (`proxy`) of
+    /// all four stand for the cells planned.
+    #[inline]
+    pub fn bits_where_planned(&self, proxy: &[u32], quad: [usize; 4]) -> Option<u8> {
+        let planned = |x: usize| self.proxy.get(x) == Some(&proxy[x]);
+        quad.into_iter().all(planned).then(|| self.bits[quad[0]])
+    }
+}
+
+/// [`fill_dropouts`](super::mesh::fill_dropouts)'s bridges of one row
+/// (left to right: a bridged vertex may be the left end of the next),
+/// where a vertex exists at every return and each bridge's ends land
+/// within three columns: a dropout stands for its left neighbour where
+/// both neighbours have vertices and lie on one surface.
+fn bridge_row(surfaces: &Surfaces, row: usize, proxy_of_row: &mut [u32]) {
+    let cols = proxy_of_row.len();
+    let first = row * cols;
+    let range_m = &surfaces.range_m[first..first + cols];
+    let mut vertex: Vec<bool> = range_m.iter().map(|r| r.is_finite()).collect();
+    for col in 0..cols {
+        if vertex[col] {
+            continue;
+        }
+        let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+        if !(vertex[left_col] && vertex[right_col]) {
+            continue;
+        }
+        let (left, right) = (first + left_col, first + right_col);
+        if !same_surface(surfaces, left, right) {
+            continue;
+        }
+        vertex[col] = true;
+        proxy_of_row[col] = left as u32;
+    }
+}
+
+/// The triangle bits of the quad whose top-left cell is `a`, its vertices
+/// standing for the cells `proxy` gives (`raster::bridged_quad`'s verdicts,
+/// vertices assumed present).
+fn quad_bits(surfaces: &Surfaces, proxy: &[u32], a: usize) -> u8 {
+    let cols = surfaces.cols;
+    let col = a % cols;
+    let b = a - col + if col + 1 == cols { 0 } else { col + 1 };
+    let (c, d) = (a + cols, b + cols);
+    let joins = &surfaces.joins;
+    let stands_in = |x: usize| proxy[x] as usize != x;
+    if !(stands_in(a) || stands_in(b) || stands_in(c) || stands_in(d)) {
+        return joins[a] & (QUAD_FIRST | QUAD_SECOND | EDGE_FIRST | EDGE_SECOND);
+    }
+    let on_one = |x: usize, y: usize, joined: bool| on_one_surface(surfaces, proxy, (x, y), joined);
+    let anti = on_one(b, c, joins[a] & JOIN_ANTI != 0);
+    let first =
+        on_one(a, b, joins[a] & JOIN_RIGHT != 0) && anti && on_one(a, c, joins[a] & JOIN_DOWN != 0);
+    let second =
+        on_one(b, d, joins[b] & JOIN_DOWN != 0) && on_one(c, d, joins[c] & JOIN_RIGHT != 0) && anti;
+    let edge = |x: usize| surfaces.edge[proxy[x] as usize];
+    let mut bits = 0;
+    if first {
+        bits |= QUAD_FIRST;
+    }
+    if second {
+        bits |= QUAD_SECOND;
+    }
+    if edge(a) || edge(b) || edge(c) {
+        bits |= EDGE_FIRST;
+    }
+    if edge(d) || edge(b) || edge(c) {
+        bits |= EDGE_SECOND;
+    }
+    bits
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::beams::BeamTable;
+    use crate::engine::grid::ImageGeometry;
+    use crate::engine::warp::mesh::fill_dropouts;
+    use crate::engine::warp::raster::bridged_quad;
+    use crate::engine::warp::{Source, Vertex, Vertices, mesh_joins};
+    use nalgebra::Point3;
+
+    /// A wall 10 m off with noisy ranges, steps (occlusions), one-cell
+    /// and two-cell dropouts, normals known on most cells.
+    fn surfaces_with_dropouts(rows: usize, cols: usize) -> Surfaces {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let cells = rows * cols;
+        let range_m: Vec<f32> = (0..cells)
+            .map(|k| match (k % 13, k % 31) {
+                (4, _) | (_, 7 | 8) => f32::NAN,
+                (9, _) => 4.0 + uniform() as f32,
+                _ => 10.0 + 0.05 * uniform() as f32,
+            })
+            .collect();
+        let direction = (0..cells)
+            .map(|k| {
+                let (row, col) = ((k / cols) as f64, (k % cols) as f64);
+                let (azimuth, elevation) = (0.01 * col, 0.02 * row - 0.05);
+                let e = [
+                    elevation.cos() * azimuth.cos(),
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                ];
+                e.map(|x| x as f32)
+            })
+            .collect();
+        let normal = (0..cells)
+            .map(|k| {
+                if k % 11 == 2 {
+                    [0.0; 3]
+                } else {
+                    let tilt = 0.3 * (uniform() - 0.5);
+                    [-(1.0 - tilt * tilt).sqrt() as f32, tilt as f32, 0.0]
+                }
+            })
+            .collect();
+        let mut surfaces = Surfaces {
+            range_m,
+            direction,
+            normal,
+            incidence_cos: vec![1.0; cells],
+            support: vec![9; cells],
+            edge: (0..cells).map(|k| k % 17 == 3).collect(),
+            noise_m_per_row: (0..rows).map(|r| 0.01 + 0.004 * r as f32).collect(),
+            range_bias_m_per_row: vec![0.0; rows],
+            joins: Vec::new(),
+            azimuth_rad: vec![0.0; cells],
+            elevation_rad: vec![0.0; cells],
+            cols,
+        };
+        surfaces.joins = mesh_joins(&surfaces, rows, cols);
+        surfaces
+    }
+
+    /// The plan's bits are `bridged_quad`'s verdicts on every quad, the
+    /// vertices present (its triangles, and each one's edge flag), and a
+    /// render whose every return has a vertex near its own column
+    /// bridges the dropouts as planned.
+    #[test]
+    fn the_plan_holds_bridged_quads_verdicts() {
+        let (rows, cols) = (9, 64);
+        let surfaces = surfaces_with_dropouts(rows, cols);
+        let time_ns = vec![0; rows * cols];
+        let source = Source::new(&surfaces, &time_ns);
+        let plan = &source.bridged;
+        let vertex = Vertex {
+            position: Point3::new(10.0, 0.0, 0.0),
+            row: 0.0,
+            col: 0.0,
+            time_ns: 0,
+        };
+        let (mut bridged, mut whole, mut broken) = (0, 0, 0);
+        for row in 0..rows - 1 {
+            for col in 0..cols {
+                let a = row * cols + col;
+                let b = row * cols + (col + 1) % cols;
+                let present = Some(&vertex);
+                let quad = bridged_quad(
+                    &source,
+                    &plan.proxy,
+                    (a, b),
+                    (present, &vertex, &vertex, present),
+                );
+                let bits = plan.bits[a];
+                let expected = [quad[0].map(|(_, edge)| edge), quad[1].map(|(_, edge)| edge)];
+                let table = [
+                    (bits & QUAD_FIRST != 0).then_some(bits & EDGE_FIRST != 0),
+                    (bits & QUAD_SECOND != 0).then_some(bits & EDGE_SECOND != 0),
+                ];
+                assert_eq!(table, expected, "quad at ({row}, {col})");
+                let stands_in = [a, b, a + cols, b + cols]
+                    .iter()
+                    .any(|&x| plan.proxy[x] as usize != x);
+                bridged += usize::from(stands_in);
+                whole += usize::from(stands_in && quad.iter().all(Option::is_some));
+                broken += usize::from(stands_in && quad.iter().any(Option::is_none));
+            }
+        }
+        assert!(
+            bridged > 50 && whole > 10 && broken > 10,
+            "{bridged} {whole} {broken}"
+        );
+        // Every return's vertex at its own cell: the render's bridges are
+        // the plan's.
+        let geometry = ImageGeometry {
+            rows,
+            cols,
+            beams: BeamTable::uniform(rows, -0.05, 0.11),
+            ring_to_row: None,
+            parallax_rad_m: None,
+        };
+        let at = (0..rows * cols)
+            .map(|k| {
+                let (col, row) = (k / rows, k % rows);
+                if surfaces.range_m[row * cols + col].is_finite() {
+                    Vertex {
+                        row: row as f64,
+                        col: col as f64,
+                        ..vertex
+                    }
+                } else {
+                    Vertex::NONE
+                }
+            })
+            .collect();
+        let mut vertices = Vertices {
+            rows,
+            at,
+            normal: Vec::new(),
+        };
+        let proxies = fill_dropouts(&source, &geometry, &mut vertices);
+        assert_eq!(proxies.cell, plan.proxy);
+        assert!(proxies.as_planned.iter().all(|&p| p));
+    }
+}
