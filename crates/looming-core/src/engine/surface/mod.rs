@@ -209,6 +209,37 @@ impl Surfaces {
     }
 }
 
+/// A hand-made surface for the tests of what reads one (the renders, the
+/// mesh): each cell's `range_m`, `direction` and `normal`, each row's
+/// noise; every other field neutral (incidence 1, one return fitted, no
+/// edge, no range offset, no joins, zero angles), for the test to set.
+#[cfg(test)]
+impl Surfaces {
+    pub(crate) fn hand_made(
+        range_m: Vec<f32>,
+        direction: Vec<[f32; 3]>,
+        normal: Vec<[f32; 3]>,
+        noise_m_per_row: Vec<f32>,
+        cols: usize,
+    ) -> Self {
+        let (cells, rows) = (range_m.len(), noise_m_per_row.len());
+        Self {
+            range_m,
+            direction,
+            normal,
+            incidence_cos: vec![1.0; cells],
+            support: vec![1; cells],
+            edge: vec![false; cells],
+            noise_m_per_row,
+            range_bias_m_per_row: vec![0.0; rows],
+            joins: vec![0; cells],
+            azimuth_rad: vec![0.0; cells],
+            elevation_rad: vec![0.0; cells],
+            cols,
+        }
+    }
+}
+
 /// A scan's surfaces are dropped when the next pair's replace them: their
 /// per-cell fields go to the next scan's (`Surfaces::empty`), whose fresh
 /// pages cost more to fault in than to fill.

@@ -145,63 +145,20 @@ mod tests {
     use crate::engine::grid::ImageGeometry;
     use crate::engine::warp::mesh::fill_dropouts;
     use crate::engine::warp::raster::bridged_quad;
+    use crate::engine::warp::test_surfaces::{Pattern, wall};
     use crate::engine::warp::{Source, Vertex, Vertices, mesh_joins};
     use nalgebra::Point3;
 
     /// A wall 10 m off with noisy ranges, steps (occlusions), one-cell
     /// and two-cell dropouts, normals known on most cells.
     fn surfaces_with_dropouts(rows: usize, cols: usize) -> Surfaces {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
+        let pattern = Pattern {
+            empty: |k| k % 13 == 4 || matches!(k % 31, 7 | 8),
+            step: |k| k % 13 == 9,
+            no_normal: |k| k % 11 == 2,
+            edge: |k| k % 17 == 3,
         };
-        let cells = rows * cols;
-        let range_m: Vec<f32> = (0..cells)
-            .map(|k| match (k % 13, k % 31) {
-                (4, _) | (_, 7 | 8) => f32::NAN,
-                (9, _) => 4.0 + uniform() as f32,
-                _ => 10.0 + 0.05 * uniform() as f32,
-            })
-            .collect();
-        let direction = (0..cells)
-            .map(|k| {
-                let (row, col) = ((k / cols) as f64, (k % cols) as f64);
-                let (azimuth, elevation) = (0.01 * col, 0.02 * row - 0.05);
-                let e = [
-                    elevation.cos() * azimuth.cos(),
-                    elevation.cos() * azimuth.sin(),
-                    elevation.sin(),
-                ];
-                e.map(|x| x as f32)
-            })
-            .collect();
-        let normal = (0..cells)
-            .map(|k| {
-                if k % 11 == 2 {
-                    [0.0; 3]
-                } else {
-                    let tilt = 0.3 * (uniform() - 0.5);
-                    [-(1.0 - tilt * tilt).sqrt() as f32, tilt as f32, 0.0]
-                }
-            })
-            .collect();
-        let mut surfaces = Surfaces {
-            range_m,
-            direction,
-            normal,
-            incidence_cos: vec![1.0; cells],
-            support: vec![9; cells],
-            edge: (0..cells).map(|k| k % 17 == 3).collect(),
-            noise_m_per_row: (0..rows).map(|r| 0.01 + 0.004 * r as f32).collect(),
-            range_bias_m_per_row: vec![0.0; rows],
-            joins: Vec::new(),
-            azimuth_rad: vec![0.0; cells],
-            elevation_rad: vec![0.0; cells],
-            cols,
-        };
+        let mut surfaces = wall(rows, cols, 0x9e37_79b9_7f4a_7c15, &pattern);
         surfaces.joins = mesh_joins(&surfaces, rows, cols);
         surfaces
     }

@@ -308,6 +308,7 @@ fn planes_on_one(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::warp::test_surfaces::{Pattern, wall};
 
     /// `mesh_joins` as it was: the edges' table, then each quad's bits
     /// from it in a table of their own, added to it.
@@ -359,60 +360,17 @@ mod tests {
 
     #[test]
     fn the_joins_table_is_as_from_two_tables() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
+        // Noisy ranges with steps (occlusions), empty cells, and normals
+        // known on most cells.
+        let pattern = Pattern {
+            empty: |k| k % 13 == 4,
+            step: |k| k % 13 == 7,
+            no_normal: |k| k % 5 == 2,
+            edge: |k| k % 7 == 3,
         };
         for (rows, cols) in [(1, 5), (2, 1), (6, 17), (9, 64)] {
             let cells = rows * cols;
-            // Noisy ranges with steps (occlusions), empty cells, and
-            // normals known on most cells.
-            let range_m: Vec<f32> = (0..cells)
-                .map(|k| match k % 13 {
-                    4 => f32::NAN,
-                    7 => 4.0 + uniform() as f32,
-                    _ => 10.0 + 0.05 * uniform() as f32,
-                })
-                .collect();
-            let direction: Vec<[f32; 3]> = (0..cells)
-                .map(|k| {
-                    let (row, col) = ((k / cols) as f64, (k % cols) as f64);
-                    let (azimuth, elevation) = (0.01 * col, 0.02 * row - 0.05);
-                    let e = [
-                        elevation.cos() * azimuth.cos(),
-                        elevation.cos() * azimuth.sin(),
-                        elevation.sin(),
-                    ];
-                    e.map(|x| x as f32)
-                })
-                .collect();
-            let normal: Vec<[f32; 3]> = (0..cells)
-                .map(|k| {
-                    if k % 5 == 2 {
-                        [0.0; 3]
-                    } else {
-                        let tilt = 0.3 * (uniform() - 0.5);
-                        [-(1.0 - tilt * tilt).sqrt() as f32, tilt as f32, 0.0]
-                    }
-                })
-                .collect();
-            let surfaces = Surfaces {
-                range_m,
-                direction,
-                normal,
-                incidence_cos: vec![1.0; cells],
-                support: vec![9; cells],
-                edge: (0..cells).map(|k| k % 7 == 3).collect(),
-                noise_m_per_row: (0..rows).map(|r| 0.01 + 0.004 * r as f32).collect(),
-                range_bias_m_per_row: vec![0.0; rows],
-                joins: Vec::new(),
-                azimuth_rad: vec![0.0; cells],
-                elevation_rad: vec![0.0; cells],
-                cols,
-            };
+            let surfaces = wall(rows, cols, 0x2545_f491_4f6c_dd1d, &pattern);
             let joins = mesh_joins(&surfaces, rows, cols);
             assert_eq!(
                 joins,

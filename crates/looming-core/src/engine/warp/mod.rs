@@ -420,3 +420,77 @@ struct Candidate {
     normal: [f32; 3],
     edge: bool,
 }
+
+/// Hand-made surfaces for the warp's tests.
+#[cfg(test)]
+pub(super) mod test_surfaces {
+    use super::Surfaces;
+    use crate::test_rng::SplitMix64;
+
+    /// The unit direction at `azimuth` and `elevation`, radians.
+    pub(in crate::engine::warp) fn unit(azimuth: f64, elevation: f64) -> [f32; 3] {
+        [
+            elevation.cos() * azimuth.cos(),
+            elevation.cos() * azimuth.sin(),
+            elevation.sin(),
+        ]
+        .map(|x| x as f32)
+    }
+
+    /// The cells' kinds in [`wall`]: each cell's index says which.
+    pub(in crate::engine::warp) struct Pattern {
+        /// Empty (no return).
+        pub empty: fn(usize) -> bool,
+        /// A step: 4-5 m, in front of the wall (an occlusion).
+        pub step: fn(usize) -> bool,
+        /// No normal known.
+        pub no_normal: fn(usize) -> bool,
+        /// An occlusion edge.
+        pub edge: fn(usize) -> bool,
+    }
+
+    /// A wall 10 m off with ranges noisy by 5 cm, the cells `pattern` says
+    /// empty, steps or edges, normals tilted at random but where it says
+    /// none; the rows' noise 1 cm and 4 mm more per row; no joins yet.
+    pub(in crate::engine::warp) fn wall(
+        rows: usize,
+        cols: usize,
+        seed: u64,
+        pattern: &Pattern,
+    ) -> Surfaces {
+        let mut rng = SplitMix64(seed);
+        let cells = rows * cols;
+        let range_m: Vec<f32> = (0..cells)
+            .map(|k| {
+                if (pattern.empty)(k) {
+                    f32::NAN
+                } else if (pattern.step)(k) {
+                    rng.uniform(4.0, 5.0) as f32
+                } else {
+                    rng.uniform(10.0, 10.05) as f32
+                }
+            })
+            .collect();
+        let direction = (0..cells)
+            .map(|k| {
+                let (row, col) = ((k / cols) as f64, (k % cols) as f64);
+                unit(0.01 * col, 0.02 * row - 0.05)
+            })
+            .collect();
+        let normal = (0..cells)
+            .map(|k| {
+                if (pattern.no_normal)(k) {
+                    [0.0; 3]
+                } else {
+                    let tilt = rng.uniform(-0.15, 0.15);
+                    [-(1.0 - tilt * tilt).sqrt() as f32, tilt as f32, 0.0]
+                }
+            })
+            .collect();
+        let noise = (0..rows).map(|r| 0.01 + 0.004 * r as f32).collect();
+        let mut surfaces = Surfaces::hand_made(range_m, direction, normal, noise, cols);
+        surfaces.edge = (0..cells).map(pattern.edge).collect();
+        surfaces.support = vec![9; cells];
+        surfaces
+    }
+}

@@ -635,6 +635,7 @@ mod tests {
     use super::*;
     use crate::engine::beams::BeamTable;
     use crate::engine::surface::Surfaces;
+    use crate::engine::warp::test_surfaces::unit;
     use nalgebra::Point3;
 
     /// A target whose rays' coordinates lie up to `spread` cell from their
@@ -663,32 +664,13 @@ mod tests {
             .collect();
         let direction = coords
             .iter()
-            .map(|&(r, c)| {
-                let (azimuth, elevation) = (f64::from(c) * 0.01, 0.02 * f64::from(r) - 0.03);
-                let e = [
-                    elevation.cos() * azimuth.cos(),
-                    elevation.cos() * azimuth.sin(),
-                    elevation.sin(),
-                ];
-                e.map(|x| x as f32)
-            })
+            .map(|&(r, c)| unit(f64::from(c) * 0.01, 0.02 * f64::from(r) - 0.03))
             .collect();
-        let surfaces = Surfaces {
-            range_m: (0..cells)
-                .map(|k| if k % 9 == 4 { f32::NAN } else { 10.0 })
-                .collect(),
-            direction,
-            normal: vec![[0.0; 3]; cells],
-            incidence_cos: vec![1.0; cells],
-            support: vec![1; cells],
-            edge: vec![false; cells],
-            noise_m_per_row: vec![0.02; rows],
-            range_bias_m_per_row: vec![0.0; rows],
-            joins: vec![0; cells],
-            azimuth_rad: vec![0.0; cells],
-            elevation_rad: vec![0.0; cells],
-            cols,
-        };
+        let range_m = (0..cells)
+            .map(|k| if k % 9 == 4 { f32::NAN } else { 10.0 })
+            .collect();
+        let normal = vec![[0.0; 3]; cells];
+        let surfaces = Surfaces::hand_made(range_m, direction, normal, vec![0.02; rows], cols);
         let geometry = ImageGeometry {
             rows,
             cols,

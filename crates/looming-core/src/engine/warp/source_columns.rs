@@ -194,22 +194,13 @@ mod tests {
                 1_000 * col as StampNs + if col % 2 == 1 && row > rows / 2 { 5 } else { 0 }
             })
             .collect();
-        let surfaces = Surfaces {
-            range_m,
-            direction: (0..cells)
-                .map(|cell| [value(cell, 1), value(cell, 2), value(cell, 3)])
-                .collect(),
-            normal: vec![[0.0; 3]; cells],
-            incidence_cos: vec![1.0; cells],
-            support: vec![0; cells],
-            edge: vec![false; cells],
-            noise_m_per_row: vec![0.01; rows],
-            range_bias_m_per_row: vec![0.0; rows],
-            joins: vec![0; cells],
-            azimuth_rad: (0..cells).map(|cell| f64::from(value(cell, 4))).collect(),
-            elevation_rad: (0..cells).map(|cell| f64::from(value(cell, 5))).collect(),
-            cols,
-        };
+        let direction = (0..cells)
+            .map(|cell| [value(cell, 1), value(cell, 2), value(cell, 3)])
+            .collect();
+        let normal = vec![[0.0; 3]; cells];
+        let mut surfaces = Surfaces::hand_made(range_m, direction, normal, vec![0.01; rows], cols);
+        surfaces.azimuth_rad = (0..cells).map(|cell| f64::from(value(cell, 4))).collect();
+        surfaces.elevation_rad = (0..cells).map(|cell| f64::from(value(cell, 5))).collect();
         (surfaces, time_ns)
     }
 
