@@ -211,14 +211,9 @@ pub struct Sweep {
 }
 
 impl Sweep {
-    /// Fraction of the sweep, in [0, 1), at which the point was fired; 0 for
-    /// a point without an azimuth.
-    pub fn fraction(&self, p: &[f32; 3]) -> f64 {
-        self.fraction_of_turn(azimuth_turn(p))
-    }
-
-    /// [`Sweep::fraction`] of a point whose azimuth is `turn` (turns,
-    /// [`azimuth_turn`]).
+    /// Fraction of the sweep, in [0, 1), at which a point whose azimuth is
+    /// `turn` (turns, [`azimuth_turn`]) was fired; 0 for a point without
+    /// one.
     fn fraction_of_turn(&self, turn: Option<f64>) -> f64 {
         match turn {
             Some(a) => (self.direction.sign() * (a - self.seam_turn)).rem_euclid(1.0),

@@ -159,7 +159,7 @@ fn laser_order_both_directions() {
         let recomputed = scan
             .points_m
             .iter()
-            .map(|p| ((sweep.fraction(p) * 0.1) as f32).to_bits());
+            .map(|p| ((sweep.fraction_of_turn(azimuth_turn(p)) * 0.1) as f32).to_bits());
         assert!(recomputed.eq(times.iter().map(|t| t.to_bits())));
         // Along a laser the time rises but for the few points fired
         // before the common seam.

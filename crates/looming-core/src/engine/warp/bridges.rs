@@ -6,14 +6,14 @@
 //! land within three columns of each other: on a dense sensor, every
 //! return's vertex but at the seam of the sweep. The quads across a bridged
 //! row (most of KITTI's HDL-64E, whose dropout rows the mesh bridges) took
-//! their edges per quad and per render ([`bridged_quad`], five edge
-//! verdicts each), though all but the vertices' presence is the source's.
-//! A render whose rows' stand-ins (`Proxies::cell`) are these takes the
-//! table's bits as an unbridged quad takes the scan's own (`mesh_joins`);
-//! a row bridged otherwise (a vertex across the seam) is judged as before.
+//! their edges per quad and per render (five edge verdicts each), though
+//! all but the vertices' presence is the source's. A render whose rows'
+//! stand-ins (`Proxies::cell`) are these takes the table's bits as an
+//! unbridged quad takes the scan's own (`mesh_joins`); a quad of a row
+//! bridged otherwise (a vertex across the seam) is judged by [`quad_bits`]
+//! on its own stand-ins.
 //!
 //! [`fill_dropouts`]: super::mesh::fill_dropouts
-//! [`bridged_quad`]: super::raster
 
 use rayon::prelude::*;
 
@@ -84,28 +84,33 @@ fn bridge_row(surfaces: &Surfaces, row: usize, proxy_of_row: &mut [u32]) {
     let cols = proxy_of_row.len();
     let first = row * cols;
     let range_m = &surfaces.range_m[first..first + cols];
-    let mut vertex: Vec<bool> = range_m.iter().map(|r| r.is_finite()).collect();
+    // A vertex: a return's, or a dropout's bridged (standing for another).
+    let vertex = |proxy_of_row: &[u32], col: usize| {
+        range_m[col].is_finite() || proxy_of_row[col] as usize != first + col
+    };
     for col in 0..cols {
-        if vertex[col] {
+        if vertex(proxy_of_row, col) {
             continue;
         }
         let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
-        if !(vertex[left_col] && vertex[right_col]) {
+        if !(vertex(proxy_of_row, left_col) && vertex(proxy_of_row, right_col)) {
             continue;
         }
         let (left, right) = (first + left_col, first + right_col);
         if !same_surface(surfaces, left, right) {
             continue;
         }
-        vertex[col] = true;
         proxy_of_row[col] = left as u32;
     }
 }
 
-/// The triangle bits of the quad whose top-left cell is `a`, its vertices
-/// standing for the cells `proxy` gives (`raster::bridged_quad`'s verdicts,
-/// vertices assumed present).
-fn quad_bits(surfaces: &Surfaces, proxy: &[u32], a: usize) -> u8 {
+/// The triangle bits ([`QUAD_FIRST`], [`QUAD_SECOND`], [`EDGE_FIRST`],
+/// [`EDGE_SECOND`]) of the quad whose top-left cell is `a`, its vertices
+/// standing for the cells `proxy` gives: a triangle where its three edges
+/// lie on one surface, judged on the cells they stand for (the scan's own
+/// joins where none stands for another), an edge where a cell it stands
+/// for is one. For the plan and for a render's row bridged otherwise.
+pub(super) fn quad_bits(surfaces: &Surfaces, proxy: &[u32], a: usize) -> u8 {
     let cols = surfaces.cols;
     let col = a % cols;
     let b = a - col + if col + 1 == cols { 0 } else { col + 1 };
@@ -144,7 +149,6 @@ mod tests {
     use crate::engine::beams::BeamTable;
     use crate::engine::grid::ImageGeometry;
     use crate::engine::warp::mesh::fill_dropouts;
-    use crate::engine::warp::raster::bridged_quad;
     use crate::engine::warp::test_surfaces::{Pattern, wall};
     use crate::engine::warp::{Source, Vertex, Vertices, mesh_joins};
     use nalgebra::Point3;
@@ -161,6 +165,74 @@ mod tests {
         let mut surfaces = wall(rows, cols, 0x9e37_79b9_7f4a_7c15, &pattern);
         surfaces.joins = mesh_joins(&surfaces, rows, cols);
         surfaces
+    }
+
+    /// The renders' own per-triangle verdicts before the plan, kept as the
+    /// reference [`quad_bits`] is held to: a quad's triangles, each with
+    /// whether it touches an occlusion edge,
+    /// where a vertex may stand for a bridged dropout: its edges judged on the
+    /// cells the vertices stand for. Cells `a` and `b` (left and right, the
+    /// next row's below them) and vertices `(a, b, c, d)`, the diagonal's `b`
+    /// and `c` present (either triangle needs them).
+    fn bridged_quad<'v>(
+        source: &Source,
+        proxy: &[u32],
+        (a, b): (usize, usize),
+        (va, vb, vc, vd): (
+            Option<&'v Vertex>,
+            &'v Vertex,
+            &'v Vertex,
+            Option<&'v Vertex>,
+        ),
+    ) -> [Option<([&'v Vertex; 3], bool)>; 2] {
+        let cols = source.surfaces.cols;
+        let (c, d) = (a + cols, b + cols);
+        let joins = &source.surfaces.joins;
+        // Each edge with the table's verdict for its two cells (`mesh_joins`),
+        // which holds where neither is a bridged dropout.
+        let bc = (b, c, joins[a] & JOIN_ANTI != 0);
+        let triangles = [
+            (
+                va,
+                a,
+                [
+                    (a, b, joins[a] & JOIN_RIGHT != 0),
+                    bc,
+                    (a, c, joins[a] & JOIN_DOWN != 0),
+                ],
+            ),
+            (
+                vd,
+                d,
+                [
+                    (b, d, joins[b] & JOIN_DOWN != 0),
+                    (c, d, joins[c] & JOIN_RIGHT != 0),
+                    bc,
+                ],
+            ),
+        ];
+        let mut quad = [None, None];
+        for (k, (apex, apex_cell, edges)) in triangles.into_iter().enumerate() {
+            let Some(apex) = apex else {
+                continue;
+            };
+            if !edges
+                .into_iter()
+                .all(|(x, y, joined)| on_one_surface(source.surfaces, proxy, (x, y), joined))
+            {
+                continue;
+            }
+            let edge = [apex_cell, b, c]
+                .iter()
+                .any(|&v| source.surfaces.edge[proxy[v] as usize]);
+            let corners = if k == 0 {
+                [apex, vb, vc]
+            } else {
+                [vb, apex, vc]
+            };
+            quad[k] = Some((corners, edge));
+        }
+        quad
     }
 
     /// The plan's bits are `bridged_quad`'s verdicts on every quad, the

@@ -115,7 +115,7 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
 
     /// Points measured at `from_ns` into the frame at `to_ns`.
     pub(super) fn until(&mut self, from_ns: StampNs, to_ns: StampNs) -> Moving {
-        if let Some(exact) = &mut self.exact {
+        if LINES && let Some(exact) = &mut self.exact {
             return exact.until(self.trajectory, from_ns, to_ns - from_ns);
         }
         if let Some((key, transform)) = self.to_time
@@ -152,7 +152,7 @@ impl<'a, const LINES: bool> TransformCache<'a, LINES> {
     /// Points measured at `from_ns` into the frame target column `col`
     /// fired in.
     pub(super) fn until_column(&mut self, from_ns: StampNs, col: usize) -> Moving {
-        if let Some(exact) = &mut self.exact {
+        if LINES && let Some(exact) = &mut self.exact {
             return exact.until_column(self.trajectory, (from_ns, col), &self.arrivals[col]);
         }
         let key = (from_ns, col);

@@ -5,11 +5,11 @@
 
 use nalgebra::Vector3;
 
+use super::bridges::quad_bits;
 use super::flat_triangle::{FlatTriangle, SharedDiagonal};
 use super::full_quad::WholeQuads;
 use super::mesh::{
-    EDGE_FIRST, EDGE_SECOND, JOIN_ANTI, JOIN_DOWN, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND,
-    on_one_surface,
+    EDGE_FIRST, EDGE_SECOND, JOIN_RIGHT, Proxies, QUAD_FIRST, QUAD_SECOND, on_one_surface,
 };
 use super::{Candidate, REACH_SLACK, Source, Span, Target, Vertex, Vertices};
 use crate::engine::grid::{ImageGeometry, wrap_col};
@@ -88,7 +88,7 @@ pub(super) fn rasterize_columns(
 /// not a whole quad ([`WholeQuads`]: one in twenty on a dense sensor);
 /// `bits` its triangles' bits where a table holds them (`mesh_joins`'),
 /// `None` where a vertex stands for a bridged dropout the source did not
-/// plan. (Out of line: the whole quads' loop keeps its values in
+/// plan ([`quad_bits`] then judges them). (Out of line: the whole quads' loop keeps its values in
 /// registers.)
 #[inline(never)]
 fn rasterize_quad_at(
@@ -108,30 +108,28 @@ fn rasterize_quad_at(
         return;
     };
     let (va, vd) = (vertices.get(row, col), vertices.get(row + 1, next));
-    // A quad of a row bridged otherwise than planned whose own vertices
-    // stand for the cells planned (all but those near the difference):
-    // the plan's bits. (Bits from the caller: it tried the whole quad.)
+    // A quad of a row bridged otherwise than planned: the plan's bits
+    // where its own vertices stand for the cells planned (all but those
+    // near the difference), else its edges judged on the cells they stand
+    // for. (Bits from the caller: it tried the whole quad.)
     let (bits, whole_tried) = match bits {
-        Some(bits) => (Some(bits), true),
+        Some(bits) => (bits, true),
         None => {
             let (b, c) = (a - col + next, a + cols);
-            let planned = source
+            let bits = source
                 .bridged
-                .bits_where_planned(&proxies.cell, [a, b, c, b + cols]);
-            (planned, false)
+                .bits_where_planned(&proxies.cell, [a, b, c, b + cols])
+                .unwrap_or_else(|| quad_bits(source.surfaces, &proxies.cell, a));
+            (bits, false)
         }
     };
     // The triangles' vertices in the mesh's order: (a, b, c), (b, d, c).
-    let quad = if let Some(bits) = bits {
-        [
-            va.filter(|_| bits & QUAD_FIRST != 0)
-                .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
-            vd.filter(|_| bits & QUAD_SECOND != 0)
-                .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
-        ]
-    } else {
-        bridged_quad(source, &proxies.cell, (a, a - col + next), (va, vb, vc, vd))
-    };
+    let quad = [
+        va.filter(|_| bits & QUAD_FIRST != 0)
+            .map(|va| ([va, vb, vc], bits & EDGE_FIRST != 0)),
+        vd.filter(|_| bits & QUAD_SECOND != 0)
+            .map(|vd| ([vb, vd, vc], bits & EDGE_SECOND != 0)),
+    ];
     // Both triangles across a bridged row judged here: the whole quads'
     // path where it takes them, the same candidates as `rasterize_quad`'s
     // (the raster tests hold them to each other).
@@ -147,72 +145,6 @@ fn rasterize_quad_at(
     for (corners, edge) in quad.into_iter().flatten() {
         rasterize_triangle(target, geometry, corners, edge, out);
     }
-}
-
-/// A quad's triangles, each with whether it touches an occlusion edge,
-/// where a vertex may stand for a bridged dropout: its edges judged on the
-/// cells the vertices stand for. Cells `a` and `b` (left and right, the
-/// next row's below them) and vertices `(a, b, c, d)`, the diagonal's `b`
-/// and `c` present (either triangle needs them).
-pub(super) fn bridged_quad<'v>(
-    source: &Source,
-    proxy: &[u32],
-    (a, b): (usize, usize),
-    (va, vb, vc, vd): (
-        Option<&'v Vertex>,
-        &'v Vertex,
-        &'v Vertex,
-        Option<&'v Vertex>,
-    ),
-) -> [Option<([&'v Vertex; 3], bool)>; 2] {
-    let cols = source.surfaces.cols;
-    let (c, d) = (a + cols, b + cols);
-    let joins = &source.surfaces.joins;
-    // Each edge with the table's verdict for its two cells (`mesh_joins`),
-    // which holds where neither is a bridged dropout.
-    let bc = (b, c, joins[a] & JOIN_ANTI != 0);
-    let triangles = [
-        (
-            va,
-            a,
-            [
-                (a, b, joins[a] & JOIN_RIGHT != 0),
-                bc,
-                (a, c, joins[a] & JOIN_DOWN != 0),
-            ],
-        ),
-        (
-            vd,
-            d,
-            [
-                (b, d, joins[b] & JOIN_DOWN != 0),
-                (c, d, joins[c] & JOIN_RIGHT != 0),
-                bc,
-            ],
-        ),
-    ];
-    let mut quad = [None, None];
-    for (k, (apex, apex_cell, edges)) in triangles.into_iter().enumerate() {
-        let Some(apex) = apex else {
-            continue;
-        };
-        if !edges
-            .into_iter()
-            .all(|(x, y, joined)| on_one_surface(source.surfaces, proxy, (x, y), joined))
-        {
-            continue;
-        }
-        let edge = [apex_cell, b, c]
-            .iter()
-            .any(|&v| source.surfaces.edge[proxy[v] as usize]);
-        let corners = if k == 0 {
-            [apex, vb, vc]
-        } else {
-            [vb, apex, vc]
-        };
-        quad[k] = Some((corners, edge));
-    }
-    quad
 }
 
 /// A sparse sensor's ring rendered into the same ring of the target: each
