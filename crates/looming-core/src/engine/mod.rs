@@ -315,7 +315,7 @@ fn compute_from_surfaces(
     // estimated motion (the same trajectory), else made here.
     let (rotated, moved) = timed(&mut times.renders_s, || {
         rayon::join(
-            || warp::render(&source, &target, &geometry, &rotation, offset_ns),
+            || warp::render_rotation(&source, &target, &geometry, &rotation, offset_ns),
             || match (estimate_render, full.as_ref()) {
                 (Some(rendered), Some(_)) => Some(rendered),
                 (_, full) => full.map(|t| warp::render(&source, &target, &geometry, t, offset_ns)),

@@ -102,6 +102,7 @@ pub(super) struct Plane {
 
 /// The plane of `count` points with `centroid` and scatter `covariance`;
 /// None where they lie along a line (or the scatter is not finite).
+#[inline]
 pub(super) fn plane_of_scatter(
     count: f64,
     centroid: Vector3<f64>,
@@ -129,6 +130,7 @@ pub(super) fn plane_of_scatter(
 /// others); the other two from the trace and the sum of principal minors.
 /// No trigonometry: this runs for every window of every cell (the closed
 /// form's acos and cos were a tenth of the engine's time).
+#[inline]
 pub(super) fn symmetric_eigenvalues(a: &Matrix3<f64>) -> Option<(f64, f64, f64)> {
     let trace = a.trace();
     let minors = principal_minors(a);
@@ -191,6 +193,7 @@ const NEWTON_CONVERGED: f64 = 1e-10;
 
 /// A unit vector in the null space of a (nearly) singular symmetric matrix: the
 /// largest cross product of two of its rows.
+#[inline]
 fn null_vector(m: &Matrix3<f64>) -> Option<Vector3<f64>> {
     let rows = [
         Vector3::new(m[(0, 0)], m[(0, 1)], m[(0, 2)]),

@@ -43,16 +43,23 @@ impl BridgedMesh {
         let rows = surfaces.range_m.len() / cols;
         if surfaces.joins.len() != rows * cols {
             // No table of joins to start from: every render judges its own.
-            return Self {
-                proxy: Vec::new(),
-                bits: Vec::new(),
-            };
+            return Self::none();
         }
         let mut proxy: Vec<u32> = (0..(rows * cols) as u32).collect();
         proxy
             .par_chunks_mut(cols)
             .enumerate()
             .for_each(|(row, proxy_of_row)| bridge_row(surfaces, row, proxy_of_row));
+        if proxy
+            .iter()
+            .enumerate()
+            .all(|(cell, &p)| p as usize == cell)
+        {
+            // Nothing to bridge (a sensor without dropouts: the synthetic
+            // drives): the plan's bits would be the scan's own joins', which
+            // the renders take where no row is bridged.
+            return Self::none();
+        }
         let mut bits = vec![0; rows * cols];
         bits.par_chunks_mut(cols)
             .enumerate()
@@ -63,6 +70,14 @@ impl BridgedMesh {
                 }
             });
         Self { proxy, bits }
+    }
+
+    /// No plan: every dropout a render meets is judged there.
+    fn none() -> Self {
+        Self {
+            proxy: Vec::new(),
+            bits: Vec::new(),
+        }
     }
 
     /// The plan's bits of the quad of cells `quad` (top left, top right,

@@ -289,6 +289,7 @@ pub(super) fn cross_dot((ax, ay): (f64, f64), (bx, by): (f64, f64)) -> (f64, f64
 /// 4e-15 rad, a millionth of a millionth of a column); beyond its reach
 /// (near returns of the ego render) the engine's `atan2`, within 1e-12 rad
 /// of libm's and a third of its cost.
+#[inline]
 pub(super) fn turn_rad(a: (f64, f64), b: (f64, f64)) -> f64 {
     let (cross, dot) = cross_dot(a, b);
     if small(cross, dot) {
