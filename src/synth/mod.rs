@@ -237,7 +237,7 @@ fn simulate(
 pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::model::ScanPair {
     use std::sync::Arc;
 
-    use crate::model::{AngularSource, PairMotion, TimeSeries};
+    use crate::model::{PairMotion, TimeSeries};
     let to_scan = |scan: &sensor::SimScan| crate::model::Scan {
         stamp_ns: encode::stamp_ns(scan.stamp_s),
         frame_id: encode::LIDAR_FRAME.into(),
@@ -278,16 +278,10 @@ pub fn simulated_pair(world: &sensor::World, index: u64, seed: u64) -> crate::mo
         previous_log_time_ns: 0,
         current_log_time_ns: 0,
         index,
-        motion: PairMotion {
-            velocity: Some(TimeSeries::new(velocity, 0.2)),
-            angular: Some(TimeSeries::new(angular, 0.2)),
-            angular_source: AngularSource::Imu,
-            velocity_extrinsic: None,
-            imu_extrinsic: None,
-            velocity_unavailable: false,
-            imu_unavailable: false,
-            coverage_complete: true,
-        },
+        motion: PairMotion::in_lidar_frame(
+            Some(TimeSeries::new(velocity, 0.2)),
+            Some(TimeSeries::new(angular, 0.2)),
+        ),
         previous: Arc::new(to_scan(&previous)),
         current: Arc::new(to_scan(&current)),
     }

@@ -217,6 +217,22 @@ pub struct PairMotion {
 }
 
 impl PairMotion {
+    /// The motion of a velocity series and an IMU's angular rates, both
+    /// already in the LiDAR frame (no extrinsics to report), every source
+    /// delivered past the pair: what a simulation or a test hands over.
+    pub fn in_lidar_frame(velocity: Option<TimeSeries>, angular: Option<TimeSeries>) -> Self {
+        Self {
+            velocity,
+            angular,
+            angular_source: AngularSource::Imu,
+            velocity_extrinsic: None,
+            imu_extrinsic: None,
+            velocity_unavailable: false,
+            imu_unavailable: false,
+            coverage_complete: true,
+        }
+    }
+
     /// The motion over this interval and the `later` one that follows it:
     /// each series' samples joined (a quantity either lacks is lacking), the
     /// later's extrinsics and source.

@@ -368,16 +368,10 @@ mod tests {
                 .collect();
             crate::model::TimeSeries::new(samples, 0.2)
         };
-        let motion = crate::model::PairMotion {
-            velocity: Some(series(&|t| Vector3::new(8.0 + 2.0 * t, 0.5 * t, 0.02))),
-            angular: Some(series(&|t| Vector3::new(0.01, -0.02, 0.3 + 0.5 * t))),
-            angular_source: crate::model::AngularSource::Imu,
-            velocity_extrinsic: None,
-            imu_extrinsic: None,
-            velocity_unavailable: false,
-            imu_unavailable: false,
-            coverage_complete: true,
-        };
+        let motion = crate::model::PairMotion::in_lidar_frame(
+            Some(series(&|t| Vector3::new(8.0 + 2.0 * t, 0.5 * t, 0.02))),
+            Some(series(&|t| Vector3::new(0.01, -0.02, 0.3 + 0.5 * t))),
+        );
         let (start_ns, end_ns) = (previous_ns - 1_000_000, current_ns + 101_000_000);
         let trajectory = Trajectory::integrate(
             &motion,

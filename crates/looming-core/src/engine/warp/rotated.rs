@@ -636,7 +636,7 @@ mod tests {
     use crate::engine::surface::Surfaces;
     use crate::engine::trajectory::MotionModel;
     use crate::engine::warp::{mesh_joins, render};
-    use crate::model::{AngularSource, PairMotion, TimeSeries};
+    use crate::model::{PairMotion, TimeSeries};
 
     const ROWS: usize = 16;
     const COLS: usize = 512;
@@ -652,16 +652,7 @@ mod tests {
                 (t_ns, Vector3::new(0.05, -0.08, 0.6))
             })
             .collect();
-        let motion = PairMotion {
-            velocity: None,
-            angular: Some(TimeSeries::new(samples, 0.2)),
-            angular_source: AngularSource::Imu,
-            velocity_extrinsic: None,
-            imu_extrinsic: None,
-            velocity_unavailable: false,
-            imu_unavailable: false,
-            coverage_complete: true,
-        };
+        let motion = PairMotion::in_lidar_frame(None, Some(TimeSeries::new(samples, 0.2)));
         let (start_ns, end_ns) = (SOURCE_NS - 1_000_000, SOURCE_NS + 2 * PERIOD_NS + 1_000_000);
         Trajectory::integrate(&motion, MotionModel::RotationOnly, true, start_ns, end_ns).unwrap()
     }
