@@ -27,7 +27,8 @@ use crate::engine::surface::Surfaces;
 /// has its vertex and every bridge's ends land near each other.
 pub(crate) struct BridgedMesh {
     /// Per cell, the cell whose surface its vertex stands for, as
-    /// [`fill_dropouts`](super::mesh::fill_dropouts) would set it.
+    /// [`fill_dropouts`](super::mesh::fill_dropouts) would set it; empty
+    /// (no plan) where the scan has no table of joins or nothing to bridge.
     pub proxy: Vec<u32>,
     /// Per quad (its top-left cell), [`mesh_joins`](super::mesh_joins)'s
     /// triangle bits ([`QUAD_FIRST`], [`QUAD_SECOND`], [`EDGE_FIRST`],

@@ -9,7 +9,9 @@
 //! column in `moved_column.rs` (the transform cache and the turns in
 //! `moved_vertices.rs`, a column of a few recurring times' exact
 //! transforms in `recurring.rs`), the mesh's joins and bridged dropouts in `mesh.rs`,
-//! the rasterisation in `raster.rs` (its common case in `full_quad.rs`).
+//! the rasterisation in `raster.rs` (its common case in `full_quad.rs`);
+//! the rotation-only render sampled ray by ray, without a raster, in
+//! `rotated.rs`.
 
 mod bridges;
 mod flat_triangle;

@@ -53,7 +53,7 @@ pub(super) fn render_rotated(
     } else {
         &source.bridged.bits
     };
-    if geometry.rows < 2 || bits.len() != cells {
+    if geometry.rows < 2 || geometry.cols == 0 || bits.len() != cells {
         return None;
     }
     let mesh = SharedMesh::of(source, geometry, trajectory);
