@@ -323,8 +323,9 @@ fn landing_turn(
 }
 
 /// One target row's rays turned, by a worker (its arrays reused row after
-/// row): first every ray's turn and image coordinates in the source, a
-/// short loop whose rays the core overlaps, then the walks.
+/// row): every ray's turn and image coordinates in the source first, then
+/// the walks. (Measured: no faster than one loop, but the phases read
+/// apart.)
 #[derive(Default)]
 struct RowRays {
     /// The columns holding a return with a time.
