@@ -95,6 +95,21 @@ impl ImageGeometry {
         between_beams(n, at, elevation_rad, near_row)
     }
 
+    /// Continuous (row, column) of a return at `(azimuth, elevation)`,
+    /// radians, seen at `range_m` ([`Self::row_f_at`], [`Self::col_f`]).
+    #[inline]
+    pub fn coords_of(
+        &self,
+        (azimuth_rad, elevation_rad): (f64, f64),
+        range_m: f64,
+        near_row: usize,
+    ) -> (f64, f64) {
+        (
+            self.row_f_at(elevation_rad, range_m, near_row),
+            self.col_f(azimuth_rad),
+        )
+    }
+
     pub fn cells(&self) -> usize {
         self.rows * self.cols
     }

@@ -477,10 +477,9 @@ fn cell_coords(surfaces: &Surfaces, geometry: &ImageGeometry) -> Vec<(f32, f32)>
             let first = own_row * cols;
             for (cell, coords) in (first..).zip(coords_row) {
                 // A return lies in or next to its own cell's row.
-                let (elevation_rad, range_m) =
-                    (surfaces.elevation_rad[cell], surfaces.range_m[cell]);
-                let row = geometry.row_f_at(elevation_rad, f64::from(range_m), own_row);
-                let col = geometry.col_f(surfaces.azimuth_rad[cell]);
+                let angles = (surfaces.azimuth_rad[cell], surfaces.elevation_rad[cell]);
+                let range_m = f64::from(surfaces.range_m[cell]);
+                let (row, col) = geometry.coords_of(angles, range_m, own_row);
                 *coords = (row as f32, col as f32);
             }
         });

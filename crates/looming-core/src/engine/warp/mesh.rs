@@ -49,7 +49,7 @@ pub(super) fn fill_dropouts(
             // The source's plan bridged this dropout between these two
             // cells only where they lie on one surface (`BridgedMesh`).
             let planned = source.bridged.proxy.get(cell) == Some(&(left as u32));
-            if (a.col - b.col).abs() > 3.0
+            if (a.col - b.col).abs() > MAX_BRIDGE_COLS
                 || !(planned || same_surface(source.surfaces, left, right))
             {
                 continue;
@@ -82,6 +82,10 @@ pub(super) fn fill_dropouts(
         as_planned,
     }
 }
+
+/// How far apart, in columns, a dropout's two neighbours may land and be
+/// bridged (further: across the seam of the sweep).
+pub(super) const MAX_BRIDGE_COLS: f64 = 3.0;
 
 /// What each vertex stands for, from [`fill_dropouts`].
 pub(super) struct Proxies {

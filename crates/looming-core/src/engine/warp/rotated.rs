@@ -27,7 +27,7 @@
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
-use super::mesh::{EDGE_FIRST, EDGE_SECOND, QUAD_FIRST, QUAD_SECOND};
+use super::mesh::{EDGE_FIRST, EDGE_SECOND, MAX_BRIDGE_COLS, QUAD_FIRST, QUAD_SECOND};
 use super::moved_vertices::turn_rad;
 use super::{Rendered, Source, Target};
 use crate::engine::atan::atan2;
@@ -87,15 +87,12 @@ pub(super) fn render_rotated(
                 rays.turn_back(target, geometry, &arrivals, row);
                 for (&col, (ray, &at)) in rays.col.iter().zip(rays.ray.iter().zip(&rays.at)) {
                     let col = col as usize;
-                    let Some(hit) = walk.hit(ray, at) else {
+                    let (Some(arrival), Some(hit)) = (&arrivals[col], walk.hit(ray, at)) else {
                         continue;
                     };
                     range_m[col] = hit.range_m as f32;
                     time_ns[col] = hit.time_ns;
                     // Into the target's frame: the inverse of the column's turn.
-                    let Some(arrival) = &arrivals[col] else {
-                        continue;
-                    };
                     let n = arrival.turn.tr_mul(&hit.normal);
                     let unit = n / n.norm().max(1e-300);
                     normal[col] = [unit.x as f32, unit.y as f32, unit.z as f32];
@@ -127,23 +124,32 @@ struct SharedMesh {
 static SPARE_MESH: Pool<SharedMesh> = Pool::new();
 
 /// The orientations of a source column's returns: exact at its first
-/// (`start_ns`) and last time, straight between (over a column's tens of
-/// microseconds the turn departs from a line by some 1e-12 rad).
+/// (`start_ns`) and last time, straight between where the column spans at
+/// most [`MAX_LINE_NS`] (a straight matrix departs from the turn by about
+/// an eighth of the squared angle: 3e-7 rad over the Pandar64's 3.3 ms
+/// columns at 0.5 rad/s), exact at each return's time where it spans more
+/// (the seam's column, whose returns lie a period apart).
 #[derive(Clone, Copy)]
 struct ColumnTurn {
     start_ns: StampNs,
     start: Matrix3<f64>,
-    /// The change per nanosecond after `start_ns`.
-    per_ns: Matrix3<f64>,
+    /// The change per nanosecond after `start_ns`; `None`: each return's
+    /// own.
+    per_ns: Option<Matrix3<f64>>,
 }
+
+/// The longest span of a column's times its orientations are taken along
+/// a line over.
+const MAX_LINE_NS: StampNs = 5_000_000;
 
 impl ColumnTurn {
     fn of(trajectory: &Trajectory, (first_ns, last_ns): (StampNs, StampNs)) -> Self {
         let start = orientation(trajectory, first_ns);
-        let per_ns = if last_ns > first_ns {
-            (orientation(trajectory, last_ns) - start) / (last_ns - first_ns) as f64
-        } else {
-            Matrix3::zeros()
+        let span_ns = last_ns - first_ns;
+        let per_ns = match span_ns {
+            0 => Some(Matrix3::zeros()),
+            1..=MAX_LINE_NS => Some((orientation(trajectory, last_ns) - start) / span_ns as f64),
+            _ => None,
         };
         Self {
             start_ns: first_ns,
@@ -153,11 +159,11 @@ impl ColumnTurn {
     }
 
     #[inline]
-    fn at(&self, time_ns: StampNs) -> Matrix3<f64> {
-        if time_ns == self.start_ns {
-            self.start
-        } else {
-            self.start + self.per_ns * (time_ns - self.start_ns) as f64
+    fn at(&self, trajectory: &Trajectory, time_ns: StampNs) -> Matrix3<f64> {
+        match &self.per_ns {
+            _ if time_ns == self.start_ns => self.start,
+            Some(per_ns) => self.start + per_ns * (time_ns - self.start_ns) as f64,
+            None => orientation(trajectory, time_ns),
         }
     }
 }
@@ -214,13 +220,15 @@ impl SharedMesh {
                     // The point as the raster's source table holds it.
                     let [x, y, z] = surfaces.direction[cell].map(f64::from);
                     let p = Vector3::new(x, y, z) * f64::from(range_m);
-                    let q = turn.at(source.time_ns[cell]) * p;
+                    let q = turn.at(trajectory, source.time_ns[cell]) * p;
                     points[col] = [q.x, q.y, q.z];
                     times[col] = source.time_ns[cell];
-                    coords[col] = [
-                        geometry.col_f(surfaces.azimuth_rad[cell]),
-                        geometry.row_f_at(surfaces.elevation_rad[cell], f64::from(range_m), row),
-                    ];
+                    let (row_f, col_f) = geometry.coords_of(
+                        (surfaces.azimuth_rad[cell], surfaces.elevation_rad[cell]),
+                        f64::from(range_m),
+                        row,
+                    );
+                    coords[col] = [col_f, row_f];
                 }
                 if let Some(proxy) = proxy.get(row_cells.clone()) {
                     bridge_row(proxy, row_cells.start, (points, coords, times));
@@ -250,7 +258,7 @@ fn bridge_row(
         }
         let (left, right) = ((col + cols - 1) % cols, (col + 1) % cols);
         let (a, b) = (coords[left], coords[right]);
-        if a[0].is_nan() || b[0].is_nan() || (a[0] - b[0]).abs() > 3.0 {
+        if a[0].is_nan() || b[0].is_nan() || (a[0] - b[0]).abs() > MAX_BRIDGE_COLS {
             continue;
         }
         let (pa, pb) = (points[left], points[right]);
@@ -353,14 +361,14 @@ impl RowRays {
         let surfaces = target.surfaces;
         let first = row * cols;
         self.col.clear();
-        self.col.extend((0..cols as u32).filter(|&col| {
-            surfaces.range_m[first + col as usize].is_finite() && arrivals[col as usize].is_some()
-        }));
         self.ray.clear();
         self.at.clear();
-        for &col in &self.col {
-            let (col, cell) = (col as usize, first + col as usize);
-            let Some(arrival) = &arrivals[col] else {
+        for (col, arrival) in arrivals.iter().enumerate().take(cols) {
+            let cell = first + col;
+            let Some(arrival) = arrival
+                .as_ref()
+                .filter(|_| surfaces.range_m[cell].is_finite())
+            else {
                 continue;
             };
             let [x, y, z] = surfaces.direction[cell].map(f64::from);
@@ -374,6 +382,7 @@ impl RowRays {
             let elevation_rad =
                 surfaces.elevation_rad[cell] + turn_rad((level, z), (back_level, back.z));
             let range_m = f64::from(surfaces.range_m[cell]);
+            self.col.push(col as u32);
             self.ray.push(ray);
             self.at.push((
                 geometry.col_f(azimuth_rad),
@@ -466,14 +475,25 @@ impl Walk<'_> {
         })
     }
 
-    /// The triangle's cells in its winding order.
+    /// The columns of the triangle's corners, in its winding order.
+    #[inline]
+    fn columns(&self, t: Triangle) -> [usize; 3] {
+        let next = if t.col + 1 == self.cols { 0 } else { t.col + 1 };
+        if t.second {
+            [next, next, t.col]
+        } else {
+            [t.col, next, t.col]
+        }
+    }
+
+    /// The triangle's cells in its winding order: `(a, b, c)` or `(b, d,
+    /// c)`, the first two in the quad's row, the last in the next.
     #[inline]
     fn corners(&self, t: Triangle) -> [usize; 3] {
-        let next = if t.col + 1 == self.cols { 0 } else { t.col + 1 };
-        let a = t.row * self.cols + t.col;
-        let b = t.row * self.cols + next;
-        let (c, d) = (a + self.cols, b + self.cols);
-        if t.second { [b, d, c] } else { [a, b, c] }
+        let [p, q, r] = self.columns(t);
+        let row = t.row * self.cols;
+        let lower = if t.second { row + self.cols } else { row };
+        [row + p, lower + q, row + self.cols + r]
     }
 
     /// The corners' image coordinates, columns taken next to `near` (across
@@ -564,13 +584,7 @@ impl Walk<'_> {
             return None;
         }
         let times = corners.map(|k| self.mesh.time_ns[k]);
-        let next = if t.col + 1 == self.cols { 0 } else { t.col + 1 };
-        // The corners' columns: (a, b, c) or (b, d, c).
-        let columns = if t.second {
-            [next, next, t.col]
-        } else {
-            [t.col, next, t.col]
-        };
+        let columns = self.columns(t);
         if (0..3).any(|i| self.across_seam(columns[i], times[i])) {
             return None;
         }
