@@ -5,8 +5,12 @@ use rayon::prelude::*;
 
 use super::ring::fit_ring_cell;
 use super::window::{fit_window, gated_window, too_narrow};
-use super::{CellSurface, EMPTY, MAX_GROWTH, Returns, Scratch, SurfaceParams, Surfaces};
+use super::{
+    CellSurface, EMPTY, MAX_GROWTH, Returns, Scratch, SurfaceParams, Surfaces, facing_sensor,
+    oriented, plane_tolerance_m, range_gate_m,
+};
 use crate::engine::grid::ImageGeometry;
+use nalgebra::Vector3;
 
 impl Surfaces {
     /// Every cell's fit (`fit_cell`), a band of rows per task on rayon's
@@ -51,19 +55,45 @@ impl Surfaces {
                         // settled on (`fit_cell`'s `first_grow`), on fine
                         // grids only (`CARRY_MIN_COLS`).
                         let mut left_grow = 1;
-                        for at in at {
-                            let cell = first + at;
-                            let (fit, grow) =
-                                fit_cell(returns, geometry, cell, params, scratch, left_grow);
-                            if carry && fit.range_m.is_finite() {
-                                left_grow = grow;
-                            }
+                        // On fine grids every odd column's cell waits for
+                        // its right neighbour's fit, to be derived from it
+                        // and its left one's (`settle_between`), but at a
+                        // tile's last column.
+                        let end = at.end;
+                        // The last cell fitted (non-empty) and its growth,
+                        // and the cell waiting with its left one's growth.
+                        let mut last: Option<(CellSurface, usize)> = None;
+                        let mut deferred = None;
+                        let mut write = |at: usize, fit: &CellSurface| {
                             range_m[at] = fit.range_m;
                             direction[at] = fit.direction;
                             normal[at] = fit.normal;
                             incidence_cos[at] = fit.incidence_cos;
                             support[at] = fit.support;
                             edge[at] = fit.edge;
+                        };
+                        for at in at.clone() {
+                            if carry && (at - row_start) % 2 == 1 && at + 1 < end {
+                                deferred = Some((at, left_grow));
+                                continue;
+                            }
+                            let cell = first + at;
+                            let (mut fit, mut grow) =
+                                fit_cell(returns, geometry, cell, params, scratch, left_grow);
+                            if let Some((between_at, its_left_grow)) = deferred.take() {
+                                let settled = settle_between(
+                                    (returns, geometry, params, scratch),
+                                    (first + between_at, its_left_grow),
+                                    last.as_ref(),
+                                    (cell, &mut fit, &mut grow),
+                                );
+                                write(between_at, &settled);
+                            }
+                            if carry && fit.range_m.is_finite() {
+                                left_grow = grow;
+                            }
+                            last = fit.range_m.is_finite().then_some((fit, grow));
+                            write(at, &fit);
                         }
                     }
                 }
@@ -136,3 +166,92 @@ pub(super) fn fit_cell(
     }
     best
 }
+
+/// The surface of `cell`, which waited for its right neighbour's fit
+/// (`right_cell`, its `fit` and growth `grow`, from `its_left_grow`):
+/// derived from its neighbours' ([`between`]) where their growths agree
+/// and they make one plane, else fitted from its left neighbour's growth;
+/// where it settles on another growth, the right neighbour is fitted
+/// again from it, as the growth carries cell by cell (the order of the
+/// carry mattered: without it the synthetic `follow`'s fused RMSE rose
+/// from 0.0087 to 0.0103).
+fn settle_between(
+    (returns, geometry, params, scratch): (&Returns, &ImageGeometry, SurfaceParams, &mut Scratch),
+    (cell, its_left_grow): (usize, usize),
+    left: Option<&(CellSurface, usize)>,
+    (right_cell, fit, grow): (usize, &mut CellSurface, &mut usize),
+) -> CellSurface {
+    let derived = left
+        .filter(|(_, left_grow)| left_grow == grow)
+        .and_then(|(left, _)| between(returns, geometry, cell, params, [left, fit]));
+    if let Some(derived) = derived {
+        return derived;
+    }
+    let (own, own_grow) = fit_cell(returns, geometry, cell, params, scratch, its_left_grow);
+    if own.range_m.is_finite() && own_grow != its_left_grow {
+        (*fit, *grow) = fit_cell(returns, geometry, right_cell, params, scratch, own_grow);
+    }
+    own
+}
+
+/// The surface of `cell` from its two neighbours' fits in its row (`[left,
+/// right]`), where both are one plane: fitted without an edge, with
+/// normals within [`BETWEEN_MAX_ANGLE_COS`], the cell's return within its
+/// tolerance of the plane between theirs. Their windows, one column either
+/// side of the cell's, hold every return of its own: the plane between
+/// theirs (the mean of their points and normals) stands for the plane of
+/// its window, and half of a fine grid's cells take no fit of their own.
+/// `None` where a fit must decide.
+fn between(
+    returns: &Returns,
+    geometry: &ImageGeometry,
+    cell: usize,
+    params: SurfaceParams,
+    [left, right]: [&CellSurface; 2],
+) -> Option<CellSurface> {
+    let center = returns.point(cell)?;
+    // Its own window within its range gate (as `gated_window` finds it).
+    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
+    let range_m = returns.ranges[cell];
+    let gate_m = range_gate_m(range_m);
+    let gated = returns
+        .extremes
+        .rows_all(rows, col, params.half_cols, |[near_m, far_m]| {
+            !(range_m - near_m > gate_m || far_m - range_m > gate_m)
+        });
+    if gated != Some(true) {
+        return None;
+    }
+    if left.edge || right.edge || left.plane_point[0].is_nan() || right.plane_point[0].is_nan() {
+        return None;
+    }
+    let normal_of = |s: &CellSurface| Vector3::from(s.normal.map(f64::from));
+    let (a, b) = (normal_of(left), normal_of(right));
+    if a.dot(&b) < BETWEEN_MAX_ANGLE_COS {
+        return None;
+    }
+    let normal = (a + b).normalize();
+    let point = (Vector3::from(left.plane_point) + Vector3::from(right.plane_point)) * 0.5;
+    let range = center.norm();
+    let tolerance = plane_tolerance_m(params, range);
+    // On both neighbours' planes, and on the plane between.
+    let off = |p: Vector3<f64>, n: &Vector3<f64>| (center - p).dot(n).abs() > tolerance;
+    if off(point, &normal)
+        || off(Vector3::from(left.plane_point), &a)
+        || off(Vector3::from(right.plane_point), &b)
+    {
+        return None;
+    }
+    let direction = center / range;
+    Some(CellSurface {
+        residual_m: (center - point).dot(&(-facing_sensor(normal, &direction))) as f32,
+        support: left.support.min(right.support),
+        edge: false,
+        ..oriented(&center, &point, normal, tolerance)
+    })
+}
+
+/// Normals of two neighbours' planes closer than this (cosine; 3 degrees)
+/// make one plane for [`between`].
+const BETWEEN_MAX_ANGLE_COS: f64 = 0.9986;

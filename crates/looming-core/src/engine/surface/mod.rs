@@ -266,6 +266,9 @@ impl Drop for Surfaces {
 struct CellSurface {
     /// The return's own distance to the fitted plane, metres.
     residual_m: f32,
+    /// A point of the fitted plane (its returns' centroid), metres; NaN
+    /// where no plane was fitted.
+    plane_point: [f64; 3],
     range_m: f32,
     direction: [f32; 3],
     normal: [f32; 3],
@@ -276,6 +279,7 @@ struct CellSurface {
 
 const EMPTY: CellSurface = CellSurface {
     residual_m: f32::NAN,
+    plane_point: [f64::NAN; 3],
     range_m: f32::NAN,
     direction: [0.0; 3],
     normal: [0.0; 3],
@@ -469,6 +473,7 @@ fn oriented(
         direction: as_f32(&direction),
         normal: as_f32(&normal),
         incidence_cos: incidence_cos as f32,
+        plane_point: [centroid.x, centroid.y, centroid.z],
         ..raw_surface(center)
     }
 }
