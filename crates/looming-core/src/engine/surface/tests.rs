@@ -313,7 +313,16 @@ fn bands_and_tiles_fit_every_cell_as_cell_by_cell() {
 /// A plane with dropouts and a close object, 17 rows (bands of 2 rows and
 /// one of 1) by `cols`: the geometry, parameters, each row's noise, the
 /// returns and their surfaces as `write_fits` writes them.
-fn tiled_scene(cols: usize) -> (ImageGeometry, SurfaceParams, Vec<f32>, Vec<Vector3<f64>>) {
+fn tiled_scene(
+    image: &RangeImage,
+    cols: usize,
+) -> (
+    ImageGeometry,
+    SurfaceParams,
+    Vec<f32>,
+    Returns<'_>,
+    Surfaces,
+) {
     let rows = 17;
     let (geometry, params, _) = dense_image(rows, cols, 0.02);
     let mut points = noisy_plane(rows, cols, 0.02, 0.5);
@@ -326,23 +335,25 @@ fn tiled_scene(cols: usize) -> (ImageGeometry, SurfaceParams, Vec<f32>, Vec<Vect
         }
     }
     let noise_m_per_row: Vec<f32> = (0..rows).map(|r| 0.01 + 0.002 * r as f32).collect();
-    (geometry, params, noise_m_per_row, points)
+    let returns = Returns::of_points(image, points, cols, &[2, 4, 6]);
+    let mut surfaces = Surfaces::empty(rows * cols, cols);
+    surfaces.write_fits(&returns, &geometry, params, &noise_m_per_row);
+    (geometry, params, noise_m_per_row, returns, surfaces)
 }
 
 /// On a fine grid (1100 columns) every cell is fitted as `fit_cell` fits
 /// it from some start of its growth (the growth carried along each tile),
 /// or, in an odd column with a right neighbour in its tile, derived from
-/// its neighbours (`fits::between`): no edge, and within a few noise
-/// sigmas of its own fit's range and normal; most of the plane's odd
-/// cells are derived, none beside the close object's edges.
+/// its neighbours (`fits::between`): no edge, within a noise sigma of
+/// one of its own fits along its normal and 8 degrees of its normal;
+/// most of the plane's odd cells are derived, none beside the close
+/// object.
 #[test]
 fn a_fine_grids_cells_are_fitted_or_derived_from_their_neighbours() {
     let cols = 1100;
-    let (geometry, params, noise_m_per_row, points) = tiled_scene(cols);
-    let (rows, image) = (geometry.rows, dense_image(1, 1, 0.0).2);
-    let returns = Returns::of_points(&image, points, cols, &[2, 4, 6]);
-    let mut surfaces = Surfaces::empty(rows * cols, cols);
-    surfaces.write_fits(&returns, &geometry, params, &noise_m_per_row);
+    let image = dense_image(1, 1, 0.0).2;
+    let (geometry, params, noise_m_per_row, returns, surfaces) = tiled_scene(&image, cols);
+    let rows = geometry.rows;
     let mut scratch = Scratch::default();
     let mut derived = 0;
     for cell in (0..rows * cols).filter(|&c| returns.point(c).is_some()) {
@@ -401,11 +412,9 @@ fn a_fine_grids_cells_are_fitted_or_derived_from_their_neighbours() {
 
 fn bands_and_tiles_fit_as_cell_by_cell(cols: usize) {
     let carry = cols >= fits::CARRY_MIN_COLS;
-    let (geometry, params, noise_m_per_row, points) = tiled_scene(cols);
-    let (rows, image) = (geometry.rows, dense_image(1, 1, 0.0).2);
-    let returns = Returns::of_points(&image, points, cols, &[2, 4, 6]);
-    let mut surfaces = Surfaces::empty(rows * cols, cols);
-    surfaces.write_fits(&returns, &geometry, params, &noise_m_per_row);
+    let image = dense_image(1, 1, 0.0).2;
+    let (geometry, params, noise_m_per_row, returns, surfaces) = tiled_scene(&image, cols);
+    let rows = geometry.rows;
     let mut scratch = Scratch::default();
     // On a fine grid each cell's growth starts at that of the last
     // non-empty cell to its left in its tile (3 beams at the tile's first
