@@ -37,7 +37,11 @@ fn label_groups(
     (rows, cols): (usize, usize),
     config: &ObjectConfig,
 ) -> Vec<u32> {
-    let cells = points.len().min(rows * cols);
+    let cells = rows * cols;
+    if points.len() != cells {
+        // Not an image of these rows and columns: no object.
+        return vec![NO_OBJECT; points.len()];
+    }
     let min_sin_beta = config.join_angle_deg.to_radians().sin();
     let mut groups = Groups::new(cells);
     for row in 0..rows {
