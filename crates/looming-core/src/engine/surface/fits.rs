@@ -4,10 +4,10 @@
 use rayon::prelude::*;
 
 use super::ring::fit_ring_cell;
-use super::window::{fit_window, gated_window, too_narrow};
+use super::window::{fit_window, gated_window, too_narrow, within_range_gate};
 use super::{
     CellSurface, EMPTY, MAX_GROWTH, Returns, Scratch, SurfaceParams, Surfaces, facing_sensor,
-    oriented, plane_tolerance_m, range_gate_m,
+    oriented, plane_tolerance_m,
 };
 use crate::engine::grid::ImageGeometry;
 use nalgebra::Vector3;
@@ -213,13 +213,7 @@ fn between(
     // Its own window within its range gate (as `gated_window` finds it).
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
     let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
-    let range_m = returns.ranges[cell];
-    let gate_m = range_gate_m(range_m);
-    let gated = returns
-        .extremes
-        .rows_all(rows, col, params.half_cols, |[near_m, far_m]| {
-            !(range_m - near_m > gate_m || far_m - range_m > gate_m)
-        });
+    let gated = within_range_gate(returns, (rows, col, params.half_cols), returns.ranges[cell]);
     if gated != Some(true) {
         return None;
     }

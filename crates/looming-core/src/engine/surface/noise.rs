@@ -7,8 +7,8 @@ use rayon::prelude::*;
 use nalgebra::Vector3;
 
 use super::plane::{Plane, plane_of_scatter};
-use super::window::{WHOLE_WINDOW_MARGIN, fit_window, gated_window};
-use super::{Returns, Scratch, SurfaceParams, plane_tolerance_m, range_gate_m};
+use super::window::{WHOLE_WINDOW_MARGIN, fit_window, gated_window, within_range_gate};
+use super::{Returns, Scratch, SurfaceParams, plane_tolerance_m};
 use crate::engine::grid::{ImageGeometry, RangeImage};
 use crate::engine::window_sums::column_spans;
 
@@ -116,13 +116,7 @@ pub(super) fn plane_scatter_m(
     let (row, col, half_cols) = (cell / geometry.cols, cell % geometry.cols, loose.half_cols);
     let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
     // `gated_window`'s gate: a return beyond it is an edge (`fit_beyond_gate`).
-    let gate_m = range_gate_m(range_m);
-    let within =
-        returns
-            .extremes
-            .rows_all(rows.clone(), col, half_cols, |[nearest_m, farthest_m]| {
-                !(range_m - nearest_m > gate_m || farthest_m - range_m > gate_m)
-            });
+    let within = within_range_gate(returns, (rows.clone(), col, half_cols), range_m);
     let total = match within {
         Some(false) => return None,
         Some(true) => returns.sums.window_over_rows(rows.clone(), col, half_cols),

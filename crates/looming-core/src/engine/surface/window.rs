@@ -385,19 +385,12 @@ pub(super) fn gated_window(
         return None;
     }
     let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    let gate_m = range_gate_m(range_m);
     let (first_row, last_row) = (
         row.saturating_sub(half_rows),
         (row + half_rows).min(geometry.rows - 1),
     );
     // Every row's gate first: a window failing it sums no moments.
-    let gated = returns.extremes.rows_all(
-        first_row..=last_row,
-        col,
-        half_cols,
-        |[nearest_m, farthest_m]| !(range_m - nearest_m > gate_m || farthest_m - range_m > gate_m),
-    )?;
-    if !gated {
+    if !within_range_gate(returns, (first_row..=last_row, col, half_cols), range_m)? {
         return None;
     }
     let total = returns
@@ -412,6 +405,25 @@ pub(super) fn gated_window(
         col,
         half_cols,
     })
+}
+
+/// Whether every return of the window (`rows`, about `col`, `half_cols`
+/// either side) lies within the range gate of a centre return at
+/// `range_m` (`range_gate_m`), from each row's range extremes; None where
+/// the window is wider than the image. The gate of [`gated_window`], the
+/// noise's plane scatter and the fits' derived cells.
+#[inline]
+pub(super) fn within_range_gate(
+    returns: &Returns,
+    (rows, col, half_cols): (std::ops::RangeInclusive<usize>, usize, usize),
+    range_m: f64,
+) -> Option<bool> {
+    let gate_m = range_gate_m(range_m);
+    returns
+        .extremes
+        .rows_all(rows, col, half_cols, |[nearest_m, farthest_m]| {
+            !(range_m - nearest_m > gate_m || farthest_m - range_m > gate_m)
+        })
 }
 
 /// Whether [`fit_window`] would fit the window's returns whole
