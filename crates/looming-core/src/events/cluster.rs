@@ -111,56 +111,11 @@ pub fn hot_clusters(
     config: &EventConfig,
     min_cells: usize,
 ) -> Vec<Cluster> {
-    let geometry = &looming.geometry;
-    let threshold_per_s = 1.0 / config.ttc_threshold_s;
-    let candidate_per_s = CANDIDATE_FRACTION * threshold_per_s;
-    let position = |cell: usize| -> Option<Vector3<f64>> {
-        let index = looming.image.point[cell];
-        (index != NO_POINT).then(|| {
-            let p = scan.points_m[index as usize];
-            Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
-        })
-    };
-    let hot: Vec<bool> = (0..geometry.cells())
-        .map(|cell| {
-            event_looming(looming, cell).is_some_and(|l| l >= candidate_per_s)
-                && f64::from(looming.incidence_cos[cell]) >= config.facing_cos
-                && position(cell).is_some()
-        })
-        .collect();
-    let components: Vec<Vec<usize>> = connected_components(geometry, &hot)
-        .into_iter()
-        .filter(|cells| cells.len() >= min_cells)
-        .collect();
-    // Each object's cells, gathered in one pass (only when a cluster needs
-    // an object's footprint).
-    let object_cells = objects
-        .filter(|_| !components.is_empty())
-        .map(|o| ObjectCells::of(&o.cell_object, o.objects.len()))
-        .unwrap_or_default();
-    components
-        .into_iter()
-        // The threshold first, from the cluster's looming alone: most
-        // clusters are below it (the floor's slow surroundings), and
-        // describing one takes every cell's offset from the corridor.
-        .filter_map(|cells| {
-            let looming_per_s = cluster_looming(looming, &cells);
-            (looming_per_s >= threshold_per_s).then(|| {
-                describe(
-                    looming,
-                    (corridor, objects, &object_cells),
-                    (&cells, looming_per_s),
-                    &position,
-                )
-            })
-        })
-        // An object covers an area; a line of cells one beam or one column
-        // wide is the trace of an edge or of the sweep's seam.
-        .filter(|cluster| cluster.rows.1 > cluster.rows.0 && cluster.cols.len >= 2)
-        .filter(|cluster| {
-            cluster.lateral_offset_m <= config.corridor_half_width_m()
-                && plausible_if_static(cluster, looming.velocity_mps, config.facing_cos)
-        })
+    let candidates = Candidates::find(looming, (scan, objects), config, min_cells);
+    candidates
+        .components
+        .iter()
+        .filter_map(|(cells, looming_per_s)| candidates.describe(cells, *looming_per_s, corridor))
         .collect()
 }
 
@@ -181,10 +136,108 @@ pub fn path_peak_looming(
         ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S.max(config.ttc_threshold_s),
         ..config.clone()
     };
-    hot_clusters(looming, (scan, objects), corridor, &floor, min_cells)
+    let mut candidates = Candidates::find(looming, (scan, objects), &floor, min_cells);
+    // The fastest first: the first that counts is the largest of those that
+    // do (describing a cluster takes every cell's offset from the corridor,
+    // and the floor finds many slow ones).
+    let mut components = std::mem::take(&mut candidates.components);
+    components.sort_by(|a, b| b.1.total_cmp(&a.1));
+    components
         .iter()
-        .map(|cluster| cluster.looming_per_s)
-        .max_by(f64::total_cmp)
+        .find(|(cells, looming_per_s)| {
+            candidates
+                .describe(cells, *looming_per_s, corridor)
+                .is_some()
+        })
+        .map(|(_, looming_per_s)| *looming_per_s)
+}
+
+/// One pair's clusters at a threshold before they are described: the
+/// connected candidate cells whose median looming reaches it.
+struct Candidates<'a> {
+    looming: &'a PairLooming,
+    scan: &'a Scan,
+    objects: Option<&'a PairObjects>,
+    object_cells: ObjectCells,
+    config: &'a EventConfig,
+    /// Each cluster's cells and median looming, 1/s.
+    components: Vec<(Vec<usize>, f64)>,
+}
+
+impl<'a> Candidates<'a> {
+    fn find(
+        looming: &'a PairLooming,
+        (scan, objects): (&'a Scan, Option<&'a PairObjects>),
+        config: &'a EventConfig,
+        min_cells: usize,
+    ) -> Self {
+        let geometry = &looming.geometry;
+        let threshold_per_s = 1.0 / config.ttc_threshold_s;
+        let candidate_per_s = CANDIDATE_FRACTION * threshold_per_s;
+        let hot: Vec<bool> = (0..geometry.cells())
+            .map(|cell| {
+                event_looming(looming, cell).is_some_and(|l| l >= candidate_per_s)
+                    && f64::from(looming.incidence_cos[cell]) >= config.facing_cos
+                    && looming.image.point[cell] != NO_POINT
+            })
+            .collect();
+        // The threshold first, from the cluster's looming alone: most
+        // clusters are below it (the floor's slow surroundings), and
+        // describing one takes every cell's offset from the corridor.
+        let components: Vec<(Vec<usize>, f64)> = connected_components(geometry, &hot)
+            .into_iter()
+            .filter(|cells| cells.len() >= min_cells)
+            .filter_map(|cells| {
+                let looming_per_s = cluster_looming(looming, &cells);
+                (looming_per_s >= threshold_per_s).then_some((cells, looming_per_s))
+            })
+            .collect();
+        // Each object's cells, gathered in one pass (only when a cluster needs
+        // an object's footprint).
+        let object_cells = objects
+            .filter(|_| !components.is_empty())
+            .map(|o| ObjectCells::of(&o.cell_object, o.objects.len()))
+            .unwrap_or_default();
+        Self {
+            looming,
+            scan,
+            objects,
+            object_cells,
+            config,
+            components,
+        }
+    }
+
+    /// The cluster of `cells` described, where it counts: an area (a line of
+    /// cells one beam or one column wide is the trace of an edge or of the
+    /// sweep's seam) reaching into the corridor, and no faster than a static
+    /// surface could loom unless part of it moves.
+    fn describe(
+        &self,
+        cells: &[usize],
+        looming_per_s: f64,
+        corridor: &Corridor,
+    ) -> Option<Cluster> {
+        let (looming, scan) = (self.looming, self.scan);
+        let position = |cell: usize| -> Option<Vector3<f64>> {
+            let index = looming.image.point[cell];
+            (index != NO_POINT).then(|| {
+                let p = scan.points_m[index as usize];
+                Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
+            })
+        };
+        let cluster = describe(
+            looming,
+            (corridor, self.objects, &self.object_cells),
+            (cells, looming_per_s),
+            &position,
+        );
+        (cluster.rows.1 > cluster.rows.0
+            && cluster.cols.len >= 2
+            && cluster.lateral_offset_m <= self.config.corridor_half_width_m()
+            && plausible_if_static(&cluster, looming.velocity_mps, self.config.facing_cos))
+        .then_some(cluster)
+    }
 }
 
 /// The slowest approach [`path_peak_looming`] reports: a time to contact of
