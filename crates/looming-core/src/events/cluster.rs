@@ -115,7 +115,9 @@ pub fn hot_clusters(
     candidates
         .components
         .iter()
-        .filter_map(|(cells, looming_per_s)| candidates.describe(cells, *looming_per_s, corridor))
+        .filter_map(|(cells, looming_per_s)| {
+            candidates.described_if_counts(cells, *looming_per_s, corridor)
+        })
         .collect()
 }
 
@@ -146,7 +148,7 @@ pub fn path_peak_looming(
         .iter()
         .find(|(cells, looming_per_s)| {
             candidates
-                .describe(cells, *looming_per_s, corridor)
+                .described_if_counts(cells, *looming_per_s, corridor)
                 .is_some()
         })
         .map(|(_, looming_per_s)| *looming_per_s)
@@ -212,7 +214,7 @@ impl<'a> Candidates<'a> {
     /// cells one beam or one column wide is the trace of an edge or of the
     /// sweep's seam) reaching into the corridor, and no faster than a static
     /// surface could loom unless part of it moves.
-    fn describe(
+    fn described_if_counts(
         &self,
         cells: &[usize],
         looming_per_s: f64,
