@@ -237,8 +237,15 @@ const ROW_NOISE_OWN: f32 = 1.0 / 3.0;
 
 /// Gate of the plane-scatter measurement (a loose noise, metres).
 const LOOSE_NOISE_M: f64 = 0.05;
-/// Every how many columns the plane scatter is measured.
-const NOISE_STRIDE: usize = 4;
+/// Every how many columns the plane scatter is measured: 256 samples a row
+/// at 2048 columns. Every fourth column cost 8 % more of the synthetic
+/// drive's plane fits and moved no figure of the accuracy tables (its
+/// outputs at 64 x 2048 are byte-identical either way); on the real
+/// logs the braking face's and the static objects' figures moved by 0-8 %
+/// either way, the near misses not at all (docs/performance.md,
+/// 2026-11-27). Tried twice before, when the fits were the old ones, it
+/// moved the braking car's object p90 by 12-16 %.
+const NOISE_STRIDE: usize = 8;
 
 /// Returns the plane of a cell's window needs for its scatter to count.
 const MIN_SCATTER_SUPPORT: f64 = 6.0;
