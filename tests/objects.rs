@@ -273,11 +273,18 @@ fn tracked_objects(
 
 /// Every pair of the committed cut-in through the engine as `process` runs
 /// it (one engine cache over the log), to `each` with its result.
-fn for_each_cut_in_pair(
+fn for_each_cut_in_pair(each: impl FnMut(looming::model::ScanPair, looming::engine::PairLooming)) {
+    for_each_sample_pair("cut-in", each);
+}
+
+/// Every pair of the committed sample log `log` (`sample_logs/LOG.mcap`)
+/// through the engine as `process` runs it, to `each` with its result.
+fn for_each_sample_pair(
+    log: &str,
     mut each: impl FnMut(looming::model::ScanPair, looming::engine::PairLooming),
 ) {
     use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
-    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_logs/cut-in.mcap");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("sample_logs/{log}.mcap"));
     let config = EngineConfig::default();
     let mut cache = EngineCache::default();
     looming::pipeline::replay(
@@ -302,7 +309,7 @@ fn for_each_cut_in_pair(
 /// are passed over.
 #[test]
 fn the_paths_peak_is_the_fastest_floor_cluster_that_counts() {
-    use looming::engine::{self, EngineCache, EngineConfig};
+    use looming::engine::EngineConfig;
     use looming::events::{
         Corridor, EventConfig, PATH_PEAK_FLOOR_TTC_S, default_min_cells, hot_clusters,
         path_peak_looming,
@@ -315,62 +322,52 @@ fn the_paths_peak_is_the_fastest_floor_cluster_that_counts() {
     };
     let (mut pairs, mut with_peak, mut raised, mut counting) = (0, 0, 0, 0);
     for log in ["cut-in", "crossing"] {
-        let input = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("sample_logs/{log}.mcap"));
-        let engine_config = EngineConfig::default();
-        let (mut cache, mut tracker) = (EngineCache::default(), ObjectTracker::default());
-        looming::pipeline::replay(
-            &input,
-            &looming::pipeline::ScanOptions::default(),
-            &mut |_| {},
-            &mut |pair| {
-                let Some(mut looming) =
-                    engine::compute_with_cache(&pair, &engine_config, &mut cache)
-                else {
-                    return;
+        let mut tracker = ObjectTracker::default();
+        for_each_sample_pair(log, |pair, mut looming| {
+            let (objects, _) = PairObjects::find_tracked_fused(
+                &pair.current,
+                &mut looming,
+                (
+                    &ObjectConfig::default(),
+                    &EngineConfig::default().threat_ttc_s,
+                ),
+                &mut tracker,
+                pair.step_s,
+            );
+            let frame = (&*pair.current, Some(&objects));
+            let min_cells = default_min_cells(&looming.geometry);
+            let corridor = |config: &EventConfig| {
+                Corridor::new(
+                    looming.velocity_mps.map(Into::into),
+                    looming.angular_velocity_radps.map(Into::into),
+                    config.corridor_half_width_m(),
+                )
+            };
+            // The peak, and the largest of the clusters kept at the
+            // floor, in the default corridor and in one 20 m wider each
+            // side (where several clusters count, of different looming).
+            let [(peak, largest), (wider, wider_largest)] = [&config, &wide].map(|config| {
+                let floor = EventConfig {
+                    ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S,
+                    ..config.clone()
                 };
-                let (objects, _) = PairObjects::find_tracked_fused(
-                    &pair.current,
-                    &mut looming,
-                    (&ObjectConfig::default(), &engine_config.threat_ttc_s),
-                    &mut tracker,
-                    pair.step_s,
-                );
-                let frame = (&*pair.current, Some(&objects));
-                let min_cells = default_min_cells(&looming.geometry);
-                let corridor = |config: &EventConfig| {
-                    Corridor::new(
-                        looming.velocity_mps.map(Into::into),
-                        looming.angular_velocity_radps.map(Into::into),
-                        config.corridor_half_width_m(),
-                    )
-                };
-                // The peak, and the largest of the clusters kept at the
-                // floor, in the default corridor and in one 20 m wider each
-                // side (where several clusters count, of different looming).
-                let [(peak, largest), (wider, wider_largest)] = [&config, &wide].map(|config| {
-                    let floor = EventConfig {
-                        ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S,
-                        ..config.clone()
-                    };
-                    let corridor = corridor(config);
-                    let kept = hot_clusters(&looming, frame, &corridor, &floor, min_cells);
-                    counting += kept.len();
-                    (
-                        path_peak_looming(&looming, frame, &corridor, config, min_cells),
-                        kept.iter()
-                            .map(|cluster| cluster.looming_per_s)
-                            .max_by(f64::total_cmp),
-                    )
-                });
-                assert_eq!(peak, largest, "{log} pair {}", pair.index);
-                assert_eq!(wider, wider_largest, "{log} pair {} (wide)", pair.index);
-                assert!(wider >= peak, "{log} pair {}", pair.index);
-                pairs += 1;
-                with_peak += usize::from(peak.is_some());
-                raised += usize::from(wider > peak);
-            },
-        )
-        .expect("a readable sample log");
+                let corridor = corridor(config);
+                let kept = hot_clusters(&looming, frame, &corridor, &floor, min_cells);
+                counting += kept.len();
+                (
+                    path_peak_looming(&looming, frame, &corridor, config, min_cells),
+                    kept.iter()
+                        .map(|cluster| cluster.looming_per_s)
+                        .max_by(f64::total_cmp),
+                )
+            });
+            assert_eq!(peak, largest, "{log} pair {}", pair.index);
+            assert_eq!(wider, wider_largest, "{log} pair {} (wide)", pair.index);
+            assert!(wider >= peak, "{log} pair {}", pair.index);
+            pairs += 1;
+            with_peak += usize::from(peak.is_some());
+            raised += usize::from(wider > peak);
+        });
     }
     assert!(pairs >= 30, "{pairs} pairs");
     assert!(with_peak >= 10, "{with_peak} of {pairs} pairs with a peak");

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use super::ring::fit_ring_cell;
-use super::window::{fit_window, gated_window, too_narrow, within_range_gate};
+use super::window::{fit_window, gated_window, too_narrow, window_rows, within_range_gate};
 use super::{
     CellSurface, EMPTY, MAX_GROWTH, Returns, Scratch, SurfaceParams, Surfaces, facing_sensor,
     oriented, plane_tolerance_m,
@@ -211,8 +211,7 @@ fn between(
 ) -> Option<CellSurface> {
     let center = returns.point(cell)?;
     // Its own window within its range gate (as `gated_window` finds it).
-    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
+    let (rows, col) = window_rows(geometry, cell, 1);
     let gated = within_range_gate(returns, (rows, col, params.half_cols), returns.ranges[cell]);
     if gated != Some(true) {
         return None;

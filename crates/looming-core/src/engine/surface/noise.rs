@@ -7,7 +7,9 @@ use rayon::prelude::*;
 use nalgebra::Vector3;
 
 use super::plane::{Plane, plane_of_scatter};
-use super::window::{WHOLE_WINDOW_MARGIN, fit_window, gated_window, within_range_gate};
+use super::window::{
+    WHOLE_WINDOW_MARGIN, fit_window, gated_window, window_rows, within_range_gate,
+};
 use super::{Returns, Scratch, SurfaceParams, plane_tolerance_m};
 use crate::engine::grid::{ImageGeometry, RangeImage};
 use crate::engine::window_sums::column_spans;
@@ -113,8 +115,7 @@ pub(super) fn plane_scatter_m(
     if range_m.is_nan() {
         return None;
     }
-    let (row, col, half_cols) = (cell / geometry.cols, cell % geometry.cols, loose.half_cols);
-    let rows = row.saturating_sub(1)..=(row + 1).min(geometry.rows - 1);
+    let ((rows, col), half_cols) = (window_rows(geometry, cell, 1), loose.half_cols);
     // `gated_window`'s gate: a return beyond it is an edge (`fit_beyond_gate`).
     let within = within_range_gate(returns, (rows.clone(), col, half_cols), range_m);
     let total = match within {

@@ -138,7 +138,7 @@ fn gather_within_gate(
     points.push(returns.points[cell]);
     let mut far_neighbours = 0;
     let gate_m = range_gate_m(range_m);
-    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
+    let ((rows, col), cols) = (window_rows(geometry, cell, half_rows), geometry.cols);
     let mut span = |cells: std::ops::Range<usize>| {
         let of_span = returns.ranges[cells.clone()]
             .iter()
@@ -156,7 +156,7 @@ fn gather_within_gate(
         }
     };
     let spans = spans_in_window_order(col, half_cols, cols);
-    for r in row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1) {
+    for r in rows {
         let row_start = r * cols;
         match &spans {
             Some(spans) => {
@@ -239,8 +239,7 @@ pub(super) fn fit_beyond_gate(
     params: SurfaceParams,
     (half_rows, half_cols): (usize, usize),
 ) -> Option<(CellSurface, Option<f64>)> {
-    let (row, col, cols) = (cell / geometry.cols, cell % geometry.cols, geometry.cols);
-    let rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
+    let ((rows, col), cols) = (window_rows(geometry, cell, half_rows), geometry.cols);
     let total = returns
         .sums
         .window_over_rows(rows.clone(), col, half_cols)?;
@@ -384,18 +383,13 @@ pub(super) fn gated_window(
     if range_m.is_nan() {
         return None;
     }
-    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
-    let (first_row, last_row) = (
-        row.saturating_sub(half_rows),
-        (row + half_rows).min(geometry.rows - 1),
-    );
+    let (rows, col) = window_rows(geometry, cell, half_rows);
+    let (first_row, last_row) = (*rows.start(), *rows.end());
     // Every row's gate first: a window failing it sums no moments.
-    if !within_range_gate(returns, (first_row..=last_row, col, half_cols), range_m)? {
+    if !within_range_gate(returns, (rows.clone(), col, half_cols), range_m)? {
         return None;
     }
-    let total = returns
-        .sums
-        .window_over_rows(first_row..=last_row, col, half_cols)?;
+    let total = returns.sums.window_over_rows(rows, col, half_cols)?;
     Some(GatedWindow {
         range_m,
         total,
@@ -405,6 +399,19 @@ pub(super) fn gated_window(
         col,
         half_cols,
     })
+}
+
+/// The rows of `cell`'s window, `half_rows` either side of its own and
+/// clamped to the image, and its column.
+#[inline]
+pub(super) fn window_rows(
+    geometry: &ImageGeometry,
+    cell: usize,
+    half_rows: usize,
+) -> (std::ops::RangeInclusive<usize>, usize) {
+    let (row, col) = (cell / geometry.cols, cell % geometry.cols);
+    let rows = row.saturating_sub(half_rows)..=(row + half_rows).min(geometry.rows - 1);
+    (rows, col)
 }
 
 /// Whether every return of the window (`rows`, about `col`, `half_cols`
