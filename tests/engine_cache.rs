@@ -87,3 +87,63 @@ fn a_new_resolution_grids_both_scans_anew() {
     assert_eq!(columns[2], columns[1]);
     assert_eq!(reused, 1);
 }
+
+/// The engine on consecutive pairs sharing their scans, the rings of the
+/// current scans from pair `swapped_from` on relabelled (rings 0 and 1
+/// swapped): each pair's result.
+fn run_relabelled(world: &World, pairs: usize, swapped_from: usize) -> Vec<engine::PairLooming> {
+    let config = EngineConfig::default();
+    let mut cache = EngineCache::default();
+    let mut previous: Option<Arc<Scan>> = None;
+    (0..pairs)
+        .map(|k| {
+            let mut pair = simulated_pair(world, 10 + k as u64, 1);
+            if k >= swapped_from {
+                let mut current = (*pair.current).clone();
+                for ring in current.ring.iter_mut().flatten() {
+                    *ring = match *ring {
+                        0 => 1,
+                        1 => 0,
+                        other => other,
+                    };
+                }
+                pair.current = Arc::new(current);
+            }
+            if let Some(before) = previous.take() {
+                pair.previous = before;
+            }
+            previous = Some(pair.current.clone());
+            engine::compute_with_cache(&pair, &config, &mut cache).expect("an image")
+        })
+        .collect()
+}
+
+/// A ring-ordered sensor's rings (each ring's row and elevation) are the
+/// sensor's: measured on one pair in ten, the pairs between taking the
+/// last measured. So a relabelling of the rings within a log (which no
+/// sensor does) shows from the next measured pair on, not before.
+#[test]
+fn the_rings_are_measured_on_one_pair_in_ten() {
+    let world = world();
+    let results = run_relabelled(&world, 12, 3);
+    let rows_of = |k: usize| {
+        results[k]
+            .geometry
+            .ring_to_row
+            .clone()
+            .expect("rows from rings")
+    };
+    let measured = rows_of(0);
+    assert_eq!(&measured[..2], &[0, 1]);
+    for k in 1..10 {
+        assert_eq!(rows_of(k), measured, "pair {k}");
+        assert_eq!(
+            results[k].geometry.beams.elevations_rad,
+            results[0].geometry.beams.elevations_rad
+        );
+    }
+    for k in 10..12 {
+        assert_eq!(&rows_of(k)[..2], &[1, 0], "pair {k}");
+        assert_eq!(rows_of(k)[2..], measured[2..]);
+    }
+}

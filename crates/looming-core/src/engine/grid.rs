@@ -352,12 +352,14 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
 ///
 /// `previous_cols`: the columns the previous pair's images had; kept where
 /// this scan's count is within [`KEPT_COLUMNS_TOLERANCE`] of it.
+/// `known_rings`: a geometry of rows from rings whose beam table, rings'
+/// rows and parallax to take where its rows are this pair's, instead of
+/// measuring them on the current scan (`EngineCache::geometry_for`).
 pub(crate) fn geometry_for(
-    previous: &Scan,
-    current: &Scan,
-    columns: Option<usize>,
-    firings_per_column: usize,
+    (previous, current): (&Scan, &Scan),
+    (columns, firings_per_column): (Option<usize>, usize),
     previous_cols: Option<usize>,
+    known_rings: Option<&ImageGeometry>,
 ) -> Option<ImageGeometry> {
     let firings_per_column = firings_per_column.max(1);
     if let (Some(rings), Some(_)) = (&current.ring, &previous.ring) {
@@ -369,7 +371,17 @@ pub(crate) fn geometry_for(
         if rows == 0 {
             return None;
         }
-        let (beams, ring_to_row, parallax_rad_m) = ring_elevations(current, rows)?;
+        let known = known_rings.filter(|g| g.rows == rows).and_then(|g| {
+            Some((
+                g.beams.clone(),
+                g.ring_to_row.clone()?,
+                g.parallax_rad_m.clone(),
+            ))
+        });
+        let (beams, ring_to_row, parallax_rad_m) = match known {
+            Some(known) => known,
+            None => ring_elevations(current, rows)?,
+        };
         let cols = columns.unwrap_or_else(|| {
             let counted = most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows);
             kept_columns(counted.div_ceil(firings_per_column), previous_cols)
