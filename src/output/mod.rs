@@ -15,10 +15,10 @@ mod passthrough;
 mod raw;
 mod summary;
 mod temp;
+mod writeback;
 pub use temp::{AtomicFile, AtomicTarget, remove_stale_temp_files};
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
@@ -29,6 +29,7 @@ use crate::input::{Catalog, CopiedRecord, InputAttachment, InputMessage};
 pub use ids::IdAllocator;
 use passthrough::{PassThroughWriter, SideKind};
 use temp::TempOutput;
+use writeback::WritebackFile;
 
 /// How the output is written.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -165,9 +166,9 @@ pub struct OutputWriter {
 
 enum Backend {
     /// Every record written anew by the `mcap` crate.
-    Rewrite(Box<mcap::Writer<BufWriter<File>>>),
+    Rewrite(Box<mcap::Writer<BufWriter<WritebackFile>>>),
     /// Input chunks copied as they are; the rest written by us.
-    PassThrough(Box<PassThroughWriter<BufWriter<File>>>),
+    PassThrough(Box<PassThroughWriter<BufWriter<WritebackFile>>>),
 }
 
 /// What [`OutputWriter::copy`] copied, for the counts.
@@ -211,7 +212,10 @@ impl OutputWriter {
         pass_through: bool,
     ) -> Result<Self, OutputError> {
         let (target, file) = TempOutput::create(final_path, options.force)?;
-        let file = BufWriter::with_capacity(FILE_BUFFER_BYTES, file);
+        let file = BufWriter::with_capacity(
+            FILE_BUFFER_BYTES,
+            WritebackFile::new(file, writeback::WRITEBACK_BYTES),
+        );
         let backend = if pass_through {
             let header = mcap::records::Header {
                 profile: options.profile.clone(),
@@ -471,7 +475,7 @@ impl OutputWriter {
             path,
             source: e.into_error(),
         })?;
-        self.target.persist(file)
+        self.target.persist(file.into_file())
     }
 }
 
