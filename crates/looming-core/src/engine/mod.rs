@@ -33,6 +33,7 @@ pub mod egomotion;
 pub mod grid;
 pub mod layout;
 mod result;
+mod rings;
 mod spare;
 mod surface;
 pub mod threat;
@@ -104,7 +105,9 @@ impl EngineCache {
     /// one pair in [`RINGS_MEASURED_EVERY`]: they are the sensor's, and
     /// measuring them from every return of every scan (an elevation and a
     /// range per return, a fit per ring) was 1.8-2.6 % of a run (`perf`,
-    /// braking KITTI and the synthetic 64 x 2048 drive).
+    /// braking KITTI and the synthetic 64 x 2048 drive). A scan whose
+    /// returns no longer lie in the rows so given (rings numbered anew:
+    /// [`rings::rings_still_hold`]) measures them at once.
     fn geometry_for(
         &mut self,
         pair: &ScanPair,
@@ -116,13 +119,14 @@ impl EngineCache {
             .as_ref()
             .filter(|(_, pairs)| *pairs + 1 < RINGS_MEASURED_EVERY)
             .map(|(rings, _)| rings);
-        let geometry = grid::geometry_for(
-            (&pair.previous, &pair.current),
-            (config.columns, config.firings_per_column),
-            previous_cols,
-            known,
-        )?;
-        let reused = known.is_some_and(|rings| rings.rows == geometry.rows);
+        let scans = (pair.previous.as_ref(), pair.current.as_ref());
+        let settings = (config.columns, config.firings_per_column);
+        let mut geometry = grid::geometry_for(scans, settings, previous_cols, known)?;
+        let mut reused = known.is_some_and(|rings| rings.rows == geometry.rows);
+        if reused && !rings::rings_still_hold(&geometry, &pair.current) {
+            geometry = grid::geometry_for(scans, settings, previous_cols, None)?;
+            reused = false;
+        }
         match &mut self.rings {
             Some((_, pairs)) if reused => *pairs += 1,
             rings => {
