@@ -369,7 +369,9 @@ mod tests {
         scan.input_point_count = scan.points_m.len() as u32;
         scan.ring = Some(rings);
         let geometry =
-            crate::engine::grid::geometry_for((&scan, &scan), (Some(cols), 1), None, None).unwrap();
+            crate::engine::grid::geometry_for((&scan, &scan), (Some(cols), 1), None, None)
+                .unwrap()
+                .0;
         let image = RangeImage::build(&scan, &geometry);
         let offsets = estimate(&scan, &image, &geometry).unwrap();
         // Without the rows beyond: up to 37 cm on the rows about the crease.

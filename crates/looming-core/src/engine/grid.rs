@@ -354,14 +354,16 @@ fn cell_of(scan: &Scan, index: usize, p: &[f32; 3], geometry: &ImageGeometry) ->
 /// `previous_cols`: the columns the previous pair's images had; kept where
 /// this scan's count is within [`KEPT_COLUMNS_TOLERANCE`] of it.
 /// `known_rings`: a geometry of rows from rings whose beam table, rings'
-/// rows and parallax to take where its rows are this pair's, instead of
-/// measuring them on the current scan (`EngineCache::geometry_for`).
+/// rows and parallax to take where its rows are this pair's and the current
+/// scan's returns still lie in them ([`rings::rings_still_hold`]), instead
+/// of measuring them on the current scan (`EngineCache::geometry_for`).
+/// Also returns whether they were taken.
 pub(crate) fn geometry_for(
     (previous, current): (&Scan, &Scan),
     (columns, firings_per_column): (Option<usize>, usize),
     previous_cols: Option<usize>,
     known_rings: Option<&ImageGeometry>,
-) -> Option<ImageGeometry> {
+) -> Option<(ImageGeometry, bool)> {
     let firings_per_column = firings_per_column.max(1);
     if let (Some(rings), Some(_)) = (&current.ring, &previous.ring) {
         let rows = rings
@@ -372,13 +374,16 @@ pub(crate) fn geometry_for(
         if rows == 0 {
             return None;
         }
-        let known = known_rings.filter(|g| g.rows == rows).and_then(|g| {
-            Some((
-                g.beams.clone(),
-                g.ring_to_row.clone()?,
-                g.parallax_rad_m.clone(),
-            ))
-        });
+        let known = known_rings
+            .filter(|g| g.rows == rows && rings::rings_still_hold(g, current))
+            .and_then(|g| {
+                Some((
+                    g.beams.clone(),
+                    g.ring_to_row.clone()?,
+                    g.parallax_rad_m.clone(),
+                ))
+            });
+        let taken = known.is_some();
         let (beams, ring_to_row, parallax_rad_m) = match known {
             Some(known) => known,
             None => rings::ring_elevations(current, rows)?,
@@ -387,13 +392,14 @@ pub(crate) fn geometry_for(
             let counted = most_points_per_row(rings.iter().map(|&r| usize::from(r)), rows);
             kept_columns(counted.div_ceil(firings_per_column), previous_cols)
         });
-        return (cols >= 8).then_some(ImageGeometry {
+        let geometry = ImageGeometry {
             rows,
             cols,
             beams,
             ring_to_row: Some(ring_to_row),
             parallax_rad_m,
-        });
+        };
+        return (cols >= 8).then_some((geometry, taken));
     }
     let elevations: Vec<f32> = current
         .points_m
@@ -407,13 +413,14 @@ pub(crate) fn geometry_for(
             most_points_per_row(elevations.iter().map(|&e| beams.row_of(f64::from(e))), rows);
         kept_columns(counted.div_ceil(firings_per_column), previous_cols)
     });
-    (cols >= 8).then_some(ImageGeometry {
+    let geometry = ImageGeometry {
         rows,
         cols,
         beams,
         ring_to_row: None,
         parallax_rad_m: None,
-    })
+    };
+    (cols >= 8).then_some((geometry, false))
 }
 
 /// The previous pair's column count where `counted` (this scan's most

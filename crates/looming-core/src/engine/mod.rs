@@ -104,10 +104,10 @@ impl EngineCache {
     /// sensor's rings taken from the last pair that measured them but on
     /// one pair in [`RINGS_MEASURED_EVERY`]: they are the sensor's, and
     /// measuring them from every return of every scan (an elevation and a
-    /// range per return, a fit per ring) was 1.8-2.6 % of a run (`perf`,
-    /// braking KITTI and the synthetic 64 x 2048 drive). A scan whose
-    /// returns no longer lie in the rows so given (rings numbered anew:
-    /// [`rings::rings_still_hold`]) measures them at once.
+    /// range per return, a fit per ring) was 1.7 % of braking KITTI's run
+    /// (`perf`, one thread). A scan whose returns no longer lie in the rows
+    /// so given (rings numbered anew: [`rings::rings_still_hold`]) measures
+    /// them at once.
     fn geometry_for(
         &mut self,
         pair: &ScanPair,
@@ -119,14 +119,12 @@ impl EngineCache {
             .as_ref()
             .filter(|(_, pairs)| *pairs + 1 < RINGS_MEASURED_EVERY)
             .map(|(rings, _)| rings);
-        let scans = (pair.previous.as_ref(), pair.current.as_ref());
-        let settings = (config.columns, config.firings_per_column);
-        let mut geometry = grid::geometry_for(scans, settings, previous_cols, known)?;
-        let mut reused = known.is_some_and(|rings| rings.rows == geometry.rows);
-        if reused && !rings::rings_still_hold(&geometry, &pair.current) {
-            geometry = grid::geometry_for(scans, settings, previous_cols, None)?;
-            reused = false;
-        }
+        let (geometry, reused) = grid::geometry_for(
+            (&pair.previous, &pair.current),
+            (config.columns, config.firings_per_column),
+            previous_cols,
+            known,
+        )?;
         match &mut self.rings {
             Some((_, pairs)) if reused => *pairs += 1,
             rings => {

@@ -150,17 +150,15 @@ impl ElevationModel {
         }
     }
 
-    /// Least squares of elevation on inverse range, once more without the
-    /// returns beyond 3 robust sigmas (mixed pixels, specks). The median
-    /// elevation (no parallax) where the ranges do not spread enough to
-    /// tell, or the slope is not a laser offset (beyond 0.5 m).
-    fn fit(samples: &mut [(f32, f32)]) -> Option<Self> {
+    /// The median elevation without parallax, and the median inverse range
+    /// (`(inverse range, elevation)` samples); None without samples. The
+    /// medians by selection, not a sort of the ring's returns (a sort per
+    /// ring per pair was a quarter of the range images' time); the sums of
+    /// [`Self::fit`] do not depend on the order but for rounding.
+    fn flat(samples: &mut [(f32, f32)]) -> Option<Self> {
         if samples.is_empty() {
             return None;
         }
-        // The median by selection, not a sort of the ring's returns (a
-        // sort per ring per pair was a quarter of the range images' time);
-        // the sums below do not depend on the order but for rounding.
         let mid = samples.len() / 2;
         let median = f64::from(
             samples
@@ -171,12 +169,20 @@ impl ElevationModel {
         let mut inverse: Vec<f32> = samples.iter().map(|s| s.0).collect();
         let median_inverse_range =
             f64::from(*inverse.select_nth_unstable_by(mid, f32::total_cmp).1);
-        let flat = Self {
+        Some(Self {
             beam_rad: median,
             parallax_rad_m: None,
             median_elevation_rad: median,
             median_inverse_range,
-        };
+        })
+    }
+
+    /// Least squares of elevation on inverse range, once more without the
+    /// returns beyond 3 robust sigmas (mixed pixels, specks). The median
+    /// elevation (no parallax) where the ranges do not spread enough to
+    /// tell, or the slope is not a laser offset (beyond 0.5 m).
+    fn fit(samples: &mut [(f32, f32)]) -> Option<Self> {
+        let flat = Self::flat(samples)?;
         if samples.len() < 32 {
             return Some(flat);
         }
@@ -300,21 +306,7 @@ mod tests {
     /// `ElevationModel::fit` as it was, computing each residual twice.
     fn fit_computing_residuals_twice(samples: &mut [(f32, f32)]) -> Option<ElevationModel> {
         let mid = samples.len() / 2;
-        let median = f64::from(
-            samples
-                .select_nth_unstable_by(mid, |a, b| a.1.total_cmp(&b.1))
-                .1
-                .1,
-        );
-        let mut inverse: Vec<f32> = samples.iter().map(|s| s.0).collect();
-        let median_inverse_range =
-            f64::from(*inverse.select_nth_unstable_by(mid, f32::total_cmp).1);
-        let flat = ElevationModel {
-            beam_rad: median,
-            parallax_rad_m: None,
-            median_elevation_rad: median,
-            median_inverse_range,
-        };
+        let flat = ElevationModel::flat(samples)?;
         let pairs = samples.iter().map(|&(u, e)| (f64::from(u), f64::from(e)));
         let mut model = least_squares(pairs, flat)?;
         let mut residuals: Vec<f64> = samples
