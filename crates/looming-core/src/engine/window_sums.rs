@@ -120,13 +120,16 @@ impl RowSums {
     /// more to fault in than the sums themselves).
     pub fn new_in(points: &[Vector3<f64>], cols: usize, buffer: Vec<Moments>) -> Self {
         let mut running = buffer;
-        running.clear();
+        // Every entry is written below: an earlier scan's buffer of the
+        // same size is not filled first (10 MB at 64 x 2048).
+        running.truncate(points.len() / cols.max(1) * (cols + 1));
         running.resize(points.len() / cols.max(1) * (cols + 1), Moments::default());
         running
             .par_chunks_mut(cols + 1)
             .zip(points.par_chunks(cols.max(1)))
             .for_each(|(running, row)| {
                 let mut total = Moments::default();
+                running[0] = total;
                 for (sum, p) in running[1..].iter_mut().zip(row) {
                     if !p.x.is_nan() {
                         total = total.plus(&Moments::of_point(p));
@@ -276,6 +279,12 @@ mod tests {
         let fresh = RowSums::new(&points, cols).into_buffer();
         let earlier = RowSums::new(&returns_with_gaps(7, cols), cols).into_buffer();
         assert_eq!(RowSums::new_in(&points, cols, earlier).into_buffer(), fresh);
+        // A buffer of another width and of the same size, with no zero in
+        // it where this image's rows start: every entry is written.
+        let other_width = RowSums::new(&returns_with_gaps(5, 13), 13).into_buffer();
+        assert_eq!(RowSums::new_in(&points, cols, other_width).into_buffer(), fresh);
+        let junk = vec![Moments::of_point(&Vector3::new(1.0, 2.0, 3.0)); fresh.len()];
+        assert_eq!(RowSums::new_in(&points, cols, junk).into_buffer(), fresh);
     }
 
     #[test]

@@ -314,26 +314,29 @@ impl<'a> Returns<'a> {
         window_half_cols: &[usize],
     ) -> Self {
         let mut spare = spare::RETURNS.take();
+        // Each return's range beside it, in the same parallel pass (a
+        // pass of its own after this one ran on one core).
         image
             .point
             .par_iter()
             .enumerate()
             .map(|(cell, &index)| {
                 if index == NO_POINT {
-                    return Vector3::repeat(f64::NAN);
+                    return (Vector3::repeat(f64::NAN), f64::NAN);
                 }
                 let p = scan.points_m[index as usize];
                 let p = Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-                match range_bias_m.get(cell / cols) {
+                let p = match range_bias_m.get(cell / cols) {
                     Some(&bias) if bias != 0.0 => {
                         let range = p.norm();
                         p * ((range - f64::from(bias)).max(0.0) / range)
                     }
                     _ => p,
-                }
+                };
+                (p, p.norm())
             })
-            .collect_into_vec(&mut spare.points);
-        Self::of_points_in(image, cols, window_half_cols, spare)
+            .unzip_into_vecs(&mut spare.points, &mut spare.ranges);
+        Self::with_ranges_in(image, cols, window_half_cols, spare)
     }
 
     /// The returns `points` (one per cell of `image`; NaN empty).
@@ -352,16 +355,27 @@ impl<'a> Returns<'a> {
     }
 
     /// The returns `spare.points`, the rest in `spare`'s buffers.
+    #[cfg(test)]
     fn of_points_in(
+        image: &'a RangeImage,
+        cols: usize,
+        window_half_cols: &[usize],
+        mut spare: spare::Spare,
+    ) -> Self {
+        spare.ranges.clear();
+        spare.ranges.extend(spare.points.iter().map(|p| p.norm()));
+        Self::with_ranges_in(image, cols, window_half_cols, spare)
+    }
+
+    /// The returns `spare.points` and their ranges `spare.ranges`, the
+    /// rest in `spare`'s buffers.
+    fn with_ranges_in(
         image: &'a RangeImage,
         cols: usize,
         window_half_cols: &[usize],
         spare: spare::Spare,
     ) -> Self {
-        let points = spare.points;
-        let mut ranges = spare.ranges;
-        ranges.clear();
-        ranges.extend(points.iter().map(|p| p.norm()));
+        let (points, ranges) = (spare.points, spare.ranges);
         let sums = RowSums::new_in(&points, cols, spare.sums);
         let extremes = RowExtremes::new_in(&ranges, cols, window_half_cols, spare.extremes);
         Self {
