@@ -282,7 +282,10 @@ mod tests {
         // A buffer of another width and of the same size, with no zero in
         // it where this image's rows start: every entry is written.
         let other_width = RowSums::new(&returns_with_gaps(5, 13), 13).into_buffer();
-        assert_eq!(RowSums::new_in(&points, cols, other_width).into_buffer(), fresh);
+        assert_eq!(
+            RowSums::new_in(&points, cols, other_width).into_buffer(),
+            fresh
+        );
         let junk = vec![Moments::of_point(&Vector3::new(1.0, 2.0, 3.0)); fresh.len()];
         assert_eq!(RowSums::new_in(&points, cols, junk).into_buffer(), fresh);
     }
