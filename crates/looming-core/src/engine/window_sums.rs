@@ -279,8 +279,9 @@ mod tests {
         let fresh = RowSums::new(&points, cols).into_buffer();
         let earlier = RowSums::new(&returns_with_gaps(7, cols), cols).into_buffer();
         assert_eq!(RowSums::new_in(&points, cols, earlier).into_buffer(), fresh);
-        // A buffer of another width and of the same size, with no zero in
-        // it where this image's rows start: every entry is written.
+        // A buffer of another width (two entries longer), with no zero in
+        // it where this image's rows start, and one of junk: every entry
+        // is written.
         let other_width = RowSums::new(&returns_with_gaps(5, 13), 13).into_buffer();
         assert_eq!(
             RowSums::new_in(&points, cols, other_width).into_buffer(),
