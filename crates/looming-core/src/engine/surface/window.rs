@@ -508,9 +508,9 @@ pub(super) const WHOLE_WINDOW_MARGIN: f64 = 0.999;
 /// `visit` of the cells of the row starting at cell `row_start` in the
 /// window's columns (`window_sums::column_spans`: none when wider than the
 /// image), span by span. Most windows do not wrap around the sweep: their
-/// one span directly (the spans' iterator, chained and flattened, was a
-/// sixth of the fits' own instructions on KITTI's braking drive, where
-/// many windows are looked at return by return).
+/// one span directly (the spans' iterator, chained and flattened, was
+/// about a fifth of `fit_window`'s own samples on KITTI's braking drive,
+/// where many windows are looked at return by return).
 #[inline]
 fn each_span(
     row_start: usize,
