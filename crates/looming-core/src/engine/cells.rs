@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use crate::model::{PairMotion, StampNs};
 
 use super::config::EngineConfig;
-use super::egomotion::{EgoEstimate, RaySigma};
+use super::egomotion::EgoEstimate;
 use super::grid::{ImageGeometry, wrapped_around};
 use super::result::mask;
 use super::surface::Surfaces;
@@ -188,7 +188,6 @@ fn raw_cells(
     (motion, estimate): (&PairMotion, Option<&EgoEstimate>),
 ) -> Vec<Raw> {
     let cols = geometry.cols;
-    let ray_sigma = estimate.map(EgoEstimate::ray_sigma);
     let mut raw = vec![Raw::EMPTY; geometry.cells()];
     raw.par_chunks_mut(cols).enumerate().for_each_init(
         || InstantVelocities::new(cols),
@@ -200,7 +199,7 @@ fn raw_cells(
                     config,
                     (current, current_time),
                     rotated,
-                    (moved, ray_sigma.as_ref()),
+                    (moved, estimate),
                     (cell, &mut noise),
                 );
                 *raw = match moved {
@@ -418,7 +417,7 @@ fn raw_cell(
     config: &EngineConfig,
     (current, current_time): (&Surfaces, &[StampNs]),
     rotated: &warp::Rendered,
-    (moved, estimate): (Option<&warp::Rendered>, Option<&RaySigma>),
+    (moved, estimate): (Option<&warp::Rendered>, Option<&EgoEstimate>),
     (cell, noise): (usize, &mut RowNoise),
 ) -> Raw {
     let nan = Raw::EMPTY;
@@ -505,7 +504,7 @@ fn raw_cell(
 /// The noise of a cell's ego prediction `l_ray_ego_per_s`: a measured
 /// velocity's error (about 1 %) and the interpolation of the previous surface,
 /// and where the motion was estimated from the scans, that estimate's
-/// uncertainty carried to the cell's ray ([`RaySigma::per_s`]).
+/// uncertainty carried to the cell's ray ([`EgoEstimate::ray_looming_sigma_per_s`]).
 /// On a log without a velocity source the estimate can be pulled by movers
 /// (a car passing beside a stopped ego made it read half a metre per second
 /// backwards on KITTI): then the measurement must outweigh it.
@@ -513,7 +512,7 @@ fn ray_ego_sigma(
     current: &Surfaces,
     cell: usize,
     l_ray_ego_per_s: f64,
-    estimate: Option<&RaySigma>,
+    estimate: Option<&EgoEstimate>,
 ) -> f64 {
     let model = 0.01 * l_ray_ego_per_s.abs() + 0.005;
     let Some(estimate) = estimate else {
@@ -523,7 +522,7 @@ fn ray_ego_sigma(
     let [dx, dy, dz] = current.direction[cell].map(f64::from);
     let [nx, ny, nz] = current.normal[cell].map(f64::from);
     let facing_cos = f64::from(current.incidence_cos[cell]).max(0.15);
-    let estimated = estimate.per_s(
+    let estimated = estimate.ray_looming_sigma_per_s(
         nalgebra::Vector3::new(dx, dy, dz) * range_m,
         nalgebra::Vector3::new(nx, ny, nz),
         facing_cos,

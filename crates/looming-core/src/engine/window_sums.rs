@@ -122,7 +122,6 @@ impl RowSums {
         let mut running = buffer;
         // Every entry is written below: an earlier scan's buffer of the
         // same size is not filled first (10 MB at 64 x 2048).
-        running.truncate(points.len() / cols.max(1) * (cols + 1));
         running.resize(points.len() / cols.max(1) * (cols + 1), Moments::default());
         running
             .par_chunks_mut(cols + 1)
@@ -156,9 +155,9 @@ impl RowSums {
         half_cols: usize,
     ) -> Option<Moments> {
         let mut total = Moments::default();
-        if col >= half_cols && col + half_cols < self.cols {
+        if let Some(span) = unwrapped_span(col, half_cols, self.cols) {
             let stride = self.cols + 1;
-            let (from, to) = (col - half_cols, col + half_cols + 1);
+            let (from, to) = (span.start, span.end);
             // Row after row, the base a stride on (an inclusive range's
             // iteration and a product per row cost more).
             let mut base = rows.start() * stride;
@@ -185,10 +184,10 @@ impl RowSums {
     #[inline]
     pub fn window(&self, row: usize, col: usize, half_cols: usize) -> Option<Moments> {
         let base = row * (self.cols + 1);
-        if col >= half_cols && col + half_cols < self.cols {
+        if let Some(span) = unwrapped_span(col, half_cols, self.cols) {
             // Most windows: one span, the same sums as below.
-            let to = self.running.get(base + col + half_cols + 1)?;
-            return Some(to.minus(self.running.get(base + col - half_cols)?));
+            let to = self.running.get(base + span.end)?;
+            return Some(to.minus(self.running.get(base + span.start)?));
         }
         let mut total = Moments::default();
         for span in column_spans(col, half_cols, self.cols)? {
@@ -198,6 +197,19 @@ impl RowSums {
         }
         Some(total)
     }
+}
+
+/// The columns `col - half_cols ..= col + half_cols` of an image `cols`
+/// wide as one range, where the window does not wrap around the sweep (most
+/// windows: [`column_spans`]' chained iterator costs more than the work
+/// over a window's few columns); None where it wraps.
+#[inline]
+pub(super) fn unwrapped_span(
+    col: usize,
+    half_cols: usize,
+    cols: usize,
+) -> Option<std::ops::Range<usize>> {
+    (col >= half_cols && col + half_cols < cols).then(|| col - half_cols..col + half_cols + 1)
 }
 
 /// The columns `col - half_cols ..= col + half_cols` of an image `cols`
@@ -211,8 +223,8 @@ pub(super) fn column_spans(
     if 2 * half_cols + 1 > cols || col >= cols {
         return None;
     }
-    let (first, second) = if col >= half_cols && col + half_cols < cols {
-        (col - half_cols..col + half_cols + 1, 0..0)
+    let (first, second) = if let Some(span) = unwrapped_span(col, half_cols, cols) {
+        (span, 0..0)
     } else if col < half_cols {
         (0..col + half_cols + 1, cols + col - half_cols..cols)
     } else {

@@ -13,7 +13,7 @@ use super::{
     plane_tolerance_m, range_gate_m, raw_surface,
 };
 use crate::engine::grid::ImageGeometry;
-use crate::engine::window_sums::{Moments, column_spans};
+use crate::engine::window_sums::{Moments, column_spans, unwrapped_span};
 
 /// One fit over a window of `2 half_rows + 1` beams by `2 half_cols + 1`
 /// columns (`(half_rows, half_cols)`), `gated` its `gated_window`; also
@@ -508,9 +508,9 @@ pub(super) const WHOLE_WINDOW_MARGIN: f64 = 0.999;
 /// `visit` of the cells of the row starting at cell `row_start` in the
 /// window's columns (`window_sums::column_spans`: none when wider than the
 /// image), span by span. Most windows do not wrap around the sweep: their
-/// one span directly (the spans' iterator, chained and flattened, was
-/// about a fifth of `fit_window`'s own samples on KITTI's braking drive,
-/// where many windows are looked at return by return).
+/// one span directly (`unwrapped_span`: the spans' iterator, chained and
+/// flattened, was about a fifth of `fit_window`'s own samples on KITTI's
+/// braking drive, where many windows are looked at return by return).
 #[inline]
 fn each_span(
     row_start: usize,
@@ -519,8 +519,8 @@ fn each_span(
     cols: usize,
     mut visit: impl FnMut(std::ops::Range<usize>),
 ) {
-    if col >= half_cols && col + half_cols < cols {
-        visit(row_start + col - half_cols..row_start + col + half_cols + 1);
+    if let Some(span) = unwrapped_span(col, half_cols, cols) {
+        visit(row_start + span.start..row_start + span.end);
         return;
     }
     for span in column_spans(col, half_cols, cols).into_iter().flatten() {
