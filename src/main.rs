@@ -8,6 +8,10 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // First: a CPU without the instructions of the build's target level
+    // (x86-64-v3, `.cargo/config.toml`) would die of SIGILL at the first
+    // one, with no word of why.
+    cli::cpu::exit_unless_supported();
     restore_sigpipe();
     keep_freed_memory();
     let args = cli::Cli::parse();

@@ -5,6 +5,7 @@
 
 mod args;
 mod choices;
+pub mod cpu;
 mod hints;
 mod report;
 mod resolve;
