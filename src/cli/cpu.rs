@@ -17,7 +17,7 @@
 /// The message for a CPU that lacks an extension the build uses.
 const UNSUPPORTED: &str = "error: this build of looming uses CPU instructions this CPU lacks: \
 it was built for x86-64-v3 (AVX, AVX2, BMI1, BMI2, F16C, FMA, LZCNT, MOVBE; \
-.cargo/config.toml) or for the level RUSTFLAGS named. Build it for this CPU with \
+.cargo/config.toml) or for the CPU that RUSTFLAGS named. Build it for this CPU with \
 RUSTFLAGS=\"-C target-cpu=native\" cargo build --release (x86-64-v2 or x86-64 \
 for a binary that runs on older CPUs too).\n";
 
