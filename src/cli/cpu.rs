@@ -5,14 +5,16 @@
 //! instruction would kill the process with SIGILL and no word of why; this
 //! check runs first in `main`, says what the build needs and how to build
 //! for the CPU instead, and exits 1. It asks for exactly what the build
-//! enabled (`cfg!(target_feature)`), so a build for an older level asks for
-//! less.
+//! enabled (`cfg!(target_feature)`, up to x86-64-v4's AVX-512), so a build
+//! for an older level asks for less, and one for `target-cpu=native` on an
+//! AVX-512 CPU for that too (checked by hand: such a build under
+//! `qemu-x86_64 -cpu max`, which has no AVX-512, gives the message).
 //!
 //! It must itself run on the older CPU: the whole crate is compiled for the
 //! build's level, and a `Vec` or a `format!` here was compiled to AVX moves
 //! (seen under `qemu-x86_64 -cpu Nehalem`). So it is flag tests and a
 //! static message written by one system call, nothing the compiler could
-//! put in vector registers; the test below runs it under qemu.
+//! put in vector registers; `tests/cpu_level.rs` runs it under qemu.
 
 /// The message for a CPU that lacks an extension the build uses.
 const UNSUPPORTED: &str = "error: this build of looming uses CPU instructions this CPU lacks: \
@@ -21,7 +23,7 @@ it was built for x86-64-v3 (AVX, AVX2, BMI1, BMI2, F16C, FMA, LZCNT, MOVBE; \
 RUSTFLAGS=\"-C target-cpu=native\" cargo build --release (x86-64-v2 or x86-64 \
 for a binary that runs on older CPUs too).\n";
 
-/// Whether the CPU lacks an x86-64 extension, up to x86-64-v3, that the
+/// Whether the CPU lacks an x86-64 extension, up to x86-64-v4, that the
 /// build was compiled to use: its CPUID flags against the build's, as masks
 /// (`std::is_x86_feature_detected!` answers true, without asking the CPU,
 /// for every extension the build enables).
@@ -46,7 +48,12 @@ fn lacks_a_compiled_extension() -> bool {
         | bit(cfg!(target_feature = "f16c"), 29);
     const LEAF_7_EBX: u32 = bit(cfg!(target_feature = "bmi1"), 3)
         | bit(cfg!(target_feature = "avx2"), 5)
-        | bit(cfg!(target_feature = "bmi2"), 8);
+        | bit(cfg!(target_feature = "bmi2"), 8)
+        | bit(cfg!(target_feature = "avx512f"), 16)
+        | bit(cfg!(target_feature = "avx512dq"), 17)
+        | bit(cfg!(target_feature = "avx512cd"), 28)
+        | bit(cfg!(target_feature = "avx512bw"), 30)
+        | bit(cfg!(target_feature = "avx512vl"), 31);
     const EXTENDED_ECX: u32 = bit(cfg!(target_feature = "lzcnt"), 5);
     // (A leaf above the highest the CPU reports is not asked.)
     let highest_leaf = __cpuid(0).eax;
@@ -64,7 +71,13 @@ fn lacks_a_compiled_extension() -> bool {
         }
     }
     // AVX also needs the OS to save its registers: OSXSAVE set, and XCR0's
-    // SSE and AVX state bits.
+    // SSE and AVX state bits (and AVX-512's three, for a build that uses
+    // it: x86-64-v4, or `target-cpu=native` on such a CPU).
+    const XCR0: u32 = if cfg!(target_feature = "avx512f") {
+        0b1110_0110
+    } else {
+        0b110
+    };
     if cfg!(target_feature = "avx") {
         if leaf_1_ecx & (1 << 27) == 0 {
             return true;
@@ -76,7 +89,7 @@ fn lacks_a_compiled_extension() -> bool {
             std::arch::asm!("xgetbv", in("ecx") 0, out("eax") xcr0_low, out("edx") _,
                 options(nomem, nostack, preserves_flags));
         }
-        if xcr0_low & 0b110 != 0b110 {
+        if xcr0_low & XCR0 != XCR0 {
             return true;
         }
     }
