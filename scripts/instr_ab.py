@@ -30,6 +30,7 @@ every scan (later one scan in ten), so a log of a few scans overweights
 import argparse
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -85,7 +86,13 @@ def inclusive_counts(profile):
         if match:
             # The first (largest) line of a name; recursion's `'2` lines differ.
             counts.setdefault(match.group(2), int(match.group(1).replace(",", "")))
+    if not total:
+        sys.exit(f"{profile}: callgrind_annotate printed no PROGRAM TOTALS")
     return counts, total
+
+
+def millions(count):
+    return "-" if count is None else f"{count / 1e6:,.1f}"
 
 
 def table(log, counts, totals, identical):
@@ -104,8 +111,8 @@ def table(log, counts, totals, identical):
         if a is None and b is None:
             continue
         ratio = f"{b / a:.4f}" if a and b is not None else "-"
-        show = lambda v: "-" if v is None else f"{v / 1e6:,.1f}"
-        lines.append(f"| {label} (`{function.split('::', 1)[1]}`) | {show(a)} | {show(b)} | {ratio} |")
+        name = function.split("::", 1)[1]
+        lines.append(f"| {label} (`{name}`) | {millions(a)} | {millions(b)} | {ratio} |")
     return "\n".join(lines) + "\n"
 
 
@@ -116,6 +123,12 @@ def main():
     parser.add_argument("log")
     parser.add_argument("--keep", help="keep the outputs and callgrind profiles here")
     args = parser.parse_args()
+    for tool in ("valgrind", "callgrind_annotate"):
+        if shutil.which(tool) is None:
+            sys.exit(f"{tool} not found: install valgrind (Debian: apt-get install valgrind)")
+    for path in (args.old, args.new, args.log):
+        if not os.path.isfile(path):
+            sys.exit(f"{path}: no such file")
     binaries = {"old": os.path.abspath(args.old), "new": os.path.abspath(args.new)}
     with tempfile.TemporaryDirectory() as scratch:
         work = args.keep or scratch
