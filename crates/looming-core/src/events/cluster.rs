@@ -116,7 +116,7 @@ pub fn hot_clusters(
         .components
         .iter()
         .filter_map(|(cells, looming_per_s)| {
-            candidates.described_if_counts(cells, *looming_per_s, corridor)
+            candidates.described_if_counts(cells, *looming_per_s, (corridor, Offset::Exact))
         })
         .collect()
 }
@@ -141,14 +141,16 @@ pub fn path_peak_looming(
     let mut candidates = Candidates::find(looming, (scan, objects), &floor, min_cells);
     // The fastest first: the first that counts is the largest of those that
     // do (describing a cluster takes every cell's offset from the corridor,
-    // and the floor finds many slow ones).
+    // and the floor finds many slow ones). Only whether it counts is asked:
+    // its distance from the path need only be known to lie within the
+    // corridor ([`Offset::WithinCorridor`]).
     let mut components = std::mem::take(&mut candidates.components);
     components.sort_by(|a, b| b.1.total_cmp(&a.1));
     components
         .iter()
         .find(|(cells, looming_per_s)| {
             candidates
-                .described_if_counts(cells, *looming_per_s, corridor)
+                .described_if_counts(cells, *looming_per_s, (corridor, Offset::WithinCorridor))
                 .is_some()
         })
         .map(|(_, looming_per_s)| *looming_per_s)
@@ -218,7 +220,7 @@ impl<'a> Candidates<'a> {
         &self,
         cells: &[usize],
         looming_per_s: f64,
-        corridor: &Corridor,
+        (corridor, offset): (&Corridor, Offset),
     ) -> Option<Cluster> {
         let (looming, scan) = (self.looming, self.scan);
         let position = |cell: usize| -> Option<Vector3<f64>> {
@@ -228,18 +230,73 @@ impl<'a> Candidates<'a> {
                 Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
             })
         };
-        let cluster = describe(
-            looming,
-            (corridor, self.objects, &self.object_cells),
-            (cells, looming_per_s),
-            &position,
-        );
-        (cluster.rows.1 > cluster.rows.0
+        let (mut cluster, object) =
+            describe(looming, self.objects, (cells, looming_per_s), &position);
+        // The distance from the path last: it takes every return of the
+        // cluster, or of the object it lies on, where the rest is cheap.
+        let counts = cluster.rows.1 > cluster.rows.0
             && cluster.cols.len >= 2
-            && cluster.lateral_offset_m <= self.config.corridor_half_width_m()
-            && plausible_if_static(&cluster, looming.velocity_mps, self.config.facing_cos))
-        .then_some(cluster)
+            && plausible_if_static(&cluster, looming.velocity_mps, self.config.facing_cos);
+        if !counts {
+            return None;
+        }
+        let half_width_m = self.config.corridor_half_width_m();
+        let within_m = match offset {
+            Offset::Exact => None,
+            Offset::WithinCorridor => Some(half_width_m),
+        };
+        cluster.lateral_offset_m = match object {
+            // The object's whole footprint: an object in the path counts whole,
+            // one beside it never, whichever of its parts is hot.
+            Some((objects, index)) => {
+                let horizon_s = (1.0 / looming_per_s).clamp(0.0, PREDICTION_HORIZON_S);
+                let object_cells = self.object_cells.get(index).unwrap_or(&[]);
+                object_offset_m(
+                    objects,
+                    (index, object_cells),
+                    (corridor, horizon_s, within_m),
+                    &position,
+                )
+            }
+            None => nearest_within(
+                cells
+                    .iter()
+                    .filter_map(|&c| position(c))
+                    .map(|p| corridor.offset_m(&p)),
+                within_m,
+            ),
+        };
+        (cluster.lateral_offset_m <= half_width_m).then_some(cluster)
     }
+}
+
+/// How exactly [`Candidates::described_if_counts`] takes a cluster's
+/// distance from the path.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Offset {
+    /// The smallest distance of its returns (an event reports it).
+    Exact,
+    /// Only as far as needed to know whether it lies within the corridor:
+    /// the first return found within it ends the search, and an object
+    /// that cannot reach it by the horizon is not followed, so the distance
+    /// reported lies on the same side of the corridor's half width as the
+    /// smallest (the path's peak looming asks only whether a cluster
+    /// counts; on a car ahead in the path its twenty predicted positions
+    /// took every return again).
+    WithinCorridor,
+}
+
+/// The smallest of `offsets_m`, or the first at most `within_m` where
+/// given ([`Offset::WithinCorridor`]).
+fn nearest_within(offsets_m: impl Iterator<Item = f64>, within_m: Option<f64>) -> f64 {
+    let mut nearest = f64::INFINITY;
+    for offset_m in offsets_m {
+        nearest = nearest.min(offset_m);
+        if within_m.is_some_and(|within_m| nearest <= within_m) {
+            break;
+        }
+    }
+    nearest
 }
 
 /// The slowest approach [`path_peak_looming`] reports: a time to contact of
@@ -359,13 +416,14 @@ fn cluster_looming(looming: &PairLooming, cells: &[usize]) -> f64 {
 }
 
 /// The cluster of hot `cells` whose looming is `looming_per_s`
-/// ([`cluster_looming`]).
-fn describe(
+/// ([`cluster_looming`]), all but its distance from the path (left
+/// infinite), and the object it lies on.
+fn describe<'o>(
     looming: &PairLooming,
-    (corridor, objects, object_cells): (&Corridor, Option<&PairObjects>, &ObjectCells),
+    objects: Option<&'o PairObjects>,
     (cells, looming_per_s): (&[usize], f64),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
-) -> Cluster {
+) -> (Cluster, Option<(&'o PairObjects, usize)>) {
     let cols = looming.geometry.cols;
     let mut ranges: Vec<f64> = cells
         .iter()
@@ -384,24 +442,11 @@ fn describe(
     let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
     let centroid = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
     let object = objects.and_then(|o| dominant_object(o, cells));
-    let lateral_offset_m = match object {
-        // The object's whole footprint: an object in the path counts whole,
-        // one beside it never, whichever of its parts is hot.
-        Some((objects, index)) => {
-            let horizon_s = (1.0 / looming_per_s).clamp(0.0, PREDICTION_HORIZON_S);
-            let cells = object_cells.get(index).unwrap_or(&[]);
-            object_offset_m(objects, (index, cells), (corridor, horizon_s), position)
-        }
-        None => points
-            .iter()
-            .map(|p| corridor.offset_m(p))
-            .fold(f64::INFINITY, f64::min),
-    };
     let mut occupied: Vec<usize> = cells.iter().map(|&c| c % cols).collect();
     occupied.sort_unstable();
     occupied.dedup();
     let rows = cells.iter().map(|&c| c / cols);
-    Cluster {
+    let cluster = Cluster {
         cells: cells.len(),
         rows: (rows.clone().min().unwrap_or(0), rows.max().unwrap_or(0)),
         cols: ColSpan::covering(&occupied, cols),
@@ -409,10 +454,11 @@ fn describe(
         centroid_m: [centroid.x, centroid.y, centroid.z],
         range_m,
         near_range_m,
-        lateral_offset_m,
+        lateral_offset_m: f64::INFINITY,
         object_id: object.map(|(objects, index)| objects.objects[index].id),
         moving_cells: cells.iter().filter(|&&c| looming.moving[c]).count(),
-    }
+    };
+    (cluster, object)
 }
 
 /// The object (index in `objects.objects`) at least half of `cells` belong
@@ -437,11 +483,15 @@ fn dominant_object<'o>(
 /// for an object moving on its own (its track's velocity over the ground at
 /// least [`MIN_PREDICTED_SPEED_MPS`]), at any time up to `horizon_s` ahead
 /// (its time to contact, at most [`PREDICTION_HORIZON_S`]): a pedestrian
-/// walking into the lane is in the path before it reaches it.
+/// walking into the lane is in the path before it reaches it. With
+/// `within_m` ([`Offset::WithinCorridor`]) only on which side of it the
+/// distance lies is kept: the search ends at the first distance found
+/// within it, and returns that cannot come within it by the horizon are
+/// not followed.
 fn object_offset_m(
     objects: &PairObjects,
     (index, cells): (usize, &[usize]),
-    (corridor, horizon_s): (&Corridor, f64),
+    (corridor, horizon_s, within_m): (&Corridor, f64, Option<f64>),
     position: &dyn Fn(usize) -> Option<Vector3<f64>>,
 ) -> f64 {
     let object = &objects.objects[index];
@@ -457,15 +507,28 @@ fn object_offset_m(
         .map(|p| (corridor.offset_m(&p), p));
     let Some(velocity) = velocity else {
         // Not moving on its own: its distance now (no order needed).
-        return offsets
-            .map(|(offset, _)| offset)
-            .fold(f64::INFINITY, f64::min);
+        return nearest_within(offsets.map(|(offset, _)| offset), within_m);
     };
     // The returns by their distance from the path now, nearest first: the
     // distance from the path moves by at most the shift (it is a distance
     // to a curve), so a shifted return need only be looked at while its
     // distance now, less the shift, could beat the nearest found.
     let mut returns: Vec<(f64, Vector3<f64>)> = offsets.collect();
+    // Where only the side of `within_m` is asked: none followed where one
+    // lies within it now, and only those that could come within it by the
+    // horizon (no distance falls by more than the largest shift) otherwise.
+    let reach_m = within_m.unwrap_or(f64::INFINITY);
+    if let Some(within_m) = within_m {
+        let nearest_now = returns.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        if nearest_now <= within_m {
+            return nearest_now;
+        }
+        let largest_shift_m = velocity.norm() * horizon_s;
+        returns.retain(|(offset_now, _)| offset_now - largest_shift_m <= within_m);
+        if returns.is_empty() {
+            return nearest_now;
+        }
+    }
     returns.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let now = returns.first().map_or(f64::INFINITY, |r| r.0);
     let steps = (horizon_s / PREDICTION_STEP_S).ceil() as usize;
@@ -474,10 +537,13 @@ fn object_offset_m(
         let shift = velocity * (k as f64 * PREDICTION_STEP_S).min(horizon_s);
         let shift_m = shift.norm();
         for (offset_now, p) in &returns {
-            if offset_now - shift_m >= nearest {
+            if offset_now - shift_m >= nearest || offset_now - shift_m > reach_m {
                 break;
             }
             nearest = nearest.min(corridor.offset_m(&(p + shift)));
+            if within_m.is_some_and(|within_m| nearest <= within_m) {
+                return nearest;
+            }
         }
     }
     nearest
@@ -582,6 +648,84 @@ mod tests {
             &unknown,
             &Vector3::new(12.0, 0.0, 0.0)
         ));
+    }
+
+    /// The smallest distance from the path of `points` moved by `velocity`
+    /// at each prediction step up to `horizon_s`, all of them tried.
+    fn offset_by_every_step(
+        corridor: &Corridor,
+        points: &[Vector3<f64>],
+        velocity: Option<Vector3<f64>>,
+        horizon_s: f64,
+    ) -> f64 {
+        let steps = (horizon_s / PREDICTION_STEP_S).ceil() as usize;
+        let shifts = (0..=steps).map(|k| match velocity {
+            Some(v) => v * (k as f64 * PREDICTION_STEP_S).min(horizon_s),
+            None => Vector3::zeros(),
+        });
+        shifts
+            .flat_map(|shift| points.iter().map(move |p| corridor.offset_m(&(p + shift))))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn an_objects_distance_from_the_path_is_every_steps_and_the_quick_one_on_its_side() {
+        let mut rng = crate::test_rng::SplitMix64(26);
+        let half_width_m = 1.5;
+        let (mut within, mut beyond) = (0, 0);
+        for trial in 0..600 {
+            let yaw_rate = rng.uniform(-0.3, 0.3);
+            let corridor = Corridor::new(
+                Some(Vector3::new(8.0, 0.0, 0.0)),
+                Some(Vector3::new(0.0, 0.0, yaw_rate)),
+                half_width_m,
+            );
+            let centre = Vector3::new(rng.uniform(3.0, 30.0), rng.uniform(-8.0, 8.0), -0.5);
+            let points: Vec<Vector3<f64>> = (0..80)
+                .map(|_| centre + Vector3::new(rng.signed(), rng.signed(), 0.5 * rng.signed()))
+                .collect();
+            let mut object = object_at(centre.into(), None);
+            // A third stand (their distance now only).
+            let velocity = (trial % 3 != 0)
+                .then(|| Vector3::new(3.0 * rng.signed(), 3.0 * rng.signed(), 0.0))
+                .filter(|v| v.norm() >= MIN_PREDICTED_SPEED_MPS);
+            object.velocity_mps = velocity.map(Into::into);
+            let objects = PairObjects {
+                ground: None,
+                cell_object: Vec::new(),
+                objects: vec![object],
+            };
+            let cells: Vec<usize> = (0..points.len()).collect();
+            let position = |cell: usize| points.get(cell).copied();
+            let horizon_s = rng.uniform(0.05, PREDICTION_HORIZON_S);
+            let offset = |within_m| {
+                object_offset_m(
+                    &objects,
+                    (0, &cells),
+                    (&corridor, horizon_s, within_m),
+                    &position,
+                )
+            };
+            let every_step = offset_by_every_step(&corridor, &points, velocity, horizon_s);
+            let exact = offset(None);
+            assert_eq!(exact, every_step, "trial {trial}");
+            let quick = offset(Some(half_width_m));
+            assert_eq!(
+                quick <= half_width_m,
+                exact <= half_width_m,
+                "trial {trial}"
+            );
+            if exact <= half_width_m {
+                within += 1;
+            } else {
+                beyond += 1;
+            }
+        }
+        // Both sides were tried.
+        assert!(
+            within > 100 && beyond > 100,
+            "{within} within, {beyond} beyond"
+        );
     }
 
     #[test]
