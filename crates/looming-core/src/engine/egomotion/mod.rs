@@ -132,14 +132,6 @@ pub struct Correction {
     pub covariance: Matrix6<f64>,
 }
 
-impl Correction {
-    /// (angular, linear) velocity as one vector, the equations' order.
-    fn as_vector(&self) -> Vector6<f64> {
-        let (w, v) = (self.angular_radps, self.velocity_mps);
-        Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
-    }
-}
-
 /// The correction to the motion the render was made with; `None` without
 /// enough static surface to pin the motion down.
 pub fn correction(
@@ -150,7 +142,42 @@ pub fn correction(
     prior: &Prior,
 ) -> Option<Correction> {
     let equations = equations(current, current_time_ns, rendered);
-    solve(&equations, &Vector6::zeros(), range_noise_m, prior)
+    solve(&equations, &Vector6::zeros(), range_noise_m, prior).map(|s| s.correction(&equations))
+}
+
+/// One robust step's solution, with what its covariance is taken from
+/// ([`Solved::correction`]): on a render only the last step's covariance
+/// is asked for (a pass over every equation and the normal matrix's
+/// inverse, in the estimate's serial code, which the other core waits on).
+struct Solved {
+    /// (angular, linear) velocity to add, the equations' order.
+    solution: Vector6<f64>,
+    inlier_cells: usize,
+    residual_m: f64,
+    misfits: Vec<f64>,
+    weights: Vec<f64>,
+    cholesky: nalgebra::Cholesky<f64, nalgebra::U6>,
+}
+
+impl Solved {
+    /// The step as a [`Correction`], its covariance taken on `equations`
+    /// (those it was solved on).
+    fn correction(self, equations: &[Equation]) -> Correction {
+        let s = self.solution;
+        let covariance = clustered_covariance(
+            (equations, &self.misfits),
+            &self.weights,
+            &s,
+            &self.cholesky.inverse(),
+        );
+        Correction {
+            angular_radps: Vector3::new(s[0], s[1], s[2]),
+            velocity_mps: Vector3::new(s[3], s[4], s[5]),
+            inlier_cells: self.inlier_cells,
+            residual_m: self.residual_m,
+            covariance,
+        }
+    }
 }
 
 /// The correction beyond `applied` (a correction already taken, not yet
@@ -162,7 +189,7 @@ fn solve(
     applied: &Vector6<f64>,
     range_noise_m: f64,
     prior: &Prior,
-) -> Option<Correction> {
+) -> Option<Solved> {
     if equations.len() < MIN_EQUATIONS {
         return None;
     }
@@ -213,18 +240,13 @@ fn solve(
     if !solution.iter().all(|x| x.is_finite()) {
         return None;
     }
-    let covariance = clustered_covariance(
-        (equations, &misfits),
-        &weights,
-        &solution,
-        &cholesky.inverse(),
-    );
-    Some(Correction {
-        angular_radps: Vector3::new(solution[0], solution[1], solution[2]),
-        velocity_mps: Vector3::new(solution[3], solution[4], solution[5]),
+    Some(Solved {
+        solution,
         inlier_cells: inliers,
         residual_m: scale,
-        covariance,
+        misfits,
+        weights,
+        cholesky,
     })
 }
 
@@ -384,14 +406,14 @@ fn steps_on_render(
         let Some(step) = solve(equations, &taken, range_noise_m, prior) else {
             break;
         };
-        let vector = step.as_vector();
+        let vector = step.solution;
         taken += vector;
         last = Some(step);
         if negligible(&vector) {
             break;
         }
     }
-    last.map(|step| (taken, step))
+    last.map(|step| (taken, step.correction(equations)))
 }
 
 /// The pair's motion with what no source measured estimated from the static
@@ -561,5 +583,40 @@ mod tests {
             let nalgebra = (gv.transpose() * cm * gv)[(0, 0)];
             assert_eq!(quadratic_form(&g, &c).to_bits(), nalgebra.to_bits());
         }
+    }
+
+    /// The steps on a render give the covariance of their last step, as a
+    /// covariance taken at every step did (it is taken once, at the end).
+    #[test]
+    fn steps_on_a_render_carry_their_last_steps_covariance() {
+        let mut rng = SplitMix64(26);
+        let equations: Vec<Equation> = (0..2_000)
+            .map(|k| Equation {
+                jacobian: Vector6::from_fn(|_, _| rng.uniform(-1.0, 1.0)),
+                block: (k % AZIMUTH_SECTORS) as u32,
+                // Outliers one in ten: the reweighting moves the steps.
+                misfit_m: rng.uniform(-0.02, 0.02) + if k % 10 == 0 { 0.5 } else { 0.0 },
+            })
+            .collect();
+        let prior = Prior {
+            rotation_known: false,
+            velocity_known: false,
+        };
+        // Every step taken (none negligible), as in the render loop.
+        let (taken, last) = steps_on_render(&equations, 0.01, &prior, |_| false).unwrap();
+        let mut applied = Vector6::zeros();
+        let mut every = None;
+        for _ in 0..STEPS_PER_RENDER {
+            let step = solve(&equations, &applied, 0.01, &prior).unwrap();
+            applied += step.solution;
+            every = Some(step.correction(&equations));
+        }
+        let every = every.unwrap();
+        assert_eq!(taken, applied);
+        assert_eq!(last.covariance, every.covariance);
+        assert_eq!(last.velocity_mps, every.velocity_mps);
+        // Not the first step's: the steps moved.
+        let first = solve(&equations, &Vector6::zeros(), 0.01, &prior).unwrap();
+        assert_ne!(first.correction(&equations).covariance, last.covariance);
     }
 }
