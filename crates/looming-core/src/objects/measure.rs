@@ -153,8 +153,21 @@ fn measuring_cells(
     cells: &[usize],
     keep: impl Fn(usize) -> bool,
 ) -> Vec<usize> {
+    cells_measuring(
+        cells,
+        |c, min_cos| measures_approach(looming, c, min_cos),
+        keep,
+    )
+}
+
+/// [`measuring_cells`] with `measures` for [`measures_approach`].
+fn cells_measuring(
+    cells: &[usize],
+    measures: impl Fn(usize, f32) -> bool,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<usize> {
     let passing = |min_cos: f32| {
-        let passes = |&c: &usize| measures_approach(looming, c, min_cos) && keep(c);
+        let passes = |&c: &usize| measures(c, min_cos) && keep(c);
         collect_bounded(cells.len(), cells.iter().copied().filter(passes))
     };
     let facing = passing(MIN_FACING_COS);
@@ -238,10 +251,14 @@ pub(super) fn keep_cells_seen_before(
             .any(|(near_m, far_m)| (*near_m..=*far_m).contains(&before_m))
     };
     let all = measuring_cells(looming, cells, |_| true);
-    let measured = measuring_cells(looming, cells, seen_before);
-    if measured == all {
+    // Where every measuring cell was seen before, the cells kept are all of
+    // them (the facing ones, or the side-on ones where fewer than three
+    // face the sensor, pass `seen_before` alike): nothing to measure again.
+    // Where one was not, it is missing from those kept.
+    if all.iter().all(|&c| seen_before(c)) {
         return false;
     }
+    let measured = measuring_cells(looming, cells, seen_before);
     let fits = Fits::of(looming, &measured);
     let assumed = (fits.measured.is_none() && still)
         .then(|| ego_prediction(looming, &all))
@@ -463,6 +480,33 @@ const SORTED_TAIL: usize = 16;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What `keep_cells_seen_before` takes for "nothing to measure again":
+    /// the cells kept are all the measuring cells exactly where every
+    /// measuring cell passes the test.
+    #[test]
+    fn the_cells_kept_are_all_exactly_where_every_measuring_cell_passes() {
+        let mut rng = crate::test_rng::SplitMix64(26);
+        let (mut all_kept, mut some_dropped) = (0, 0);
+        for _ in 0..5_000 {
+            let n = (rng.uniform(0.0, 9.0)) as usize;
+            let cos: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, 1.0) as f32).collect();
+            let valid: Vec<bool> = (0..n).map(|_| rng.uniform(0.0, 1.0) < 0.8).collect();
+            let seen: Vec<bool> = (0..n).map(|_| rng.uniform(0.0, 1.0) < 0.9).collect();
+            let cells: Vec<usize> = (0..n).collect();
+            let measures = |c: usize, min_cos: f32| valid[c] && cos[c] >= min_cos;
+            let all = cells_measuring(&cells, measures, |_| true);
+            let kept = cells_measuring(&cells, measures, |c| seen[c]);
+            let every_passes = all.iter().all(|&c| seen[c]);
+            assert_eq!(kept == all, every_passes, "{cos:?} {valid:?} {seen:?}");
+            if every_passes {
+                all_kept += 1;
+            } else {
+                some_dropped += 1;
+            }
+        }
+        assert!(all_kept > 500 && some_dropped > 500);
+    }
 
     /// The selection gives what the running sum over the sorted values
     /// gives, ties and equal weights included.

@@ -78,9 +78,11 @@ impl ObjectTracker {
             .collect();
         let mut candidates = Vec::new();
         for (o, object) in objects.objects.iter().enumerate() {
+            // Once per object, not per track (a `hypot` each).
+            let extent_m = extent(object);
             for (t, track) in self.tracks.iter().enumerate() {
                 let distance = distance(&predicted[t], &object.centroid_m);
-                let gate = MIN_GATE_M + GATE_PER_EXTENT * track.extent_m.max(extent(object));
+                let gate = MIN_GATE_M + GATE_PER_EXTENT * track.extent_m.max(extent_m);
                 if distance <= gate {
                     candidates.push((distance, o, t));
                 }
