@@ -6,7 +6,7 @@
 
 use looming::engine::{EngineCache, EngineConfig, compute_with_cache};
 use looming::events::{
-    Corridor, EventConfig, EventDetector, PairFrame, default_min_cells, hot_clusters,
+    Corridor, EventConfig, EventDetector, FacingLooming, PairFrame, default_min_cells, hot_clusters,
 };
 use looming::output::OutputOptions;
 use looming::synth::{SynthOptions, synthesize};
@@ -110,10 +110,11 @@ fn main() {
                 pair.motion.angular_velocity_at(stamp),
                 wide.corridor_half_width_m(),
             );
+            let facing = FacingLooming::of(&looming, &wide);
             let clusters: Vec<String> = hot_clusters(
                 &looming,
                 (&pair.current, Some(&objects)),
-                &corridor,
+                (&corridor, &facing),
                 &wide,
                 2,
             )

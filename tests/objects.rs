@@ -311,8 +311,8 @@ fn for_each_sample_pair(
 fn the_paths_peak_is_the_fastest_floor_cluster_that_counts() {
     use looming::engine::EngineConfig;
     use looming::events::{
-        Corridor, EventConfig, PATH_PEAK_FLOOR_TTC_S, default_min_cells, hot_clusters,
-        path_peak_looming,
+        Corridor, EventConfig, FacingLooming, PATH_PEAK_FLOOR_TTC_S, default_min_cells,
+        hot_clusters, path_peak_looming,
     };
     use looming::objects::{ObjectConfig, ObjectTracker, PairObjects};
     let config = EventConfig::default();
@@ -352,10 +352,11 @@ fn the_paths_peak_is_the_fastest_floor_cluster_that_counts() {
                     ..config.clone()
                 };
                 let corridor = corridor(config);
-                let kept = hot_clusters(&looming, frame, &corridor, &floor, min_cells);
+                let facing = FacingLooming::of(&looming, config);
+                let kept = hot_clusters(&looming, frame, (&corridor, &facing), &floor, min_cells);
                 counting += kept.len();
                 (
-                    path_peak_looming(&looming, frame, &corridor, config, min_cells),
+                    path_peak_looming(&looming, frame, (&corridor, &facing), config, min_cells),
                     kept.iter()
                         .map(|cluster| cluster.looming_per_s)
                         .max_by(f64::total_cmp),

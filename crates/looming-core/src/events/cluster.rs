@@ -107,11 +107,11 @@ impl ColSpan {
 pub fn hot_clusters(
     looming: &PairLooming,
     (scan, objects): (&Scan, Option<&PairObjects>),
-    corridor: &Corridor,
+    (corridor, facing): (&Corridor, &FacingLooming),
     config: &EventConfig,
     min_cells: usize,
 ) -> Vec<Cluster> {
-    let candidates = Candidates::find(looming, (scan, objects), config, min_cells);
+    let candidates = Candidates::find(looming, (scan, objects), (config, facing), min_cells);
     candidates
         .components
         .iter()
@@ -130,7 +130,7 @@ pub fn hot_clusters(
 pub fn path_peak_looming(
     looming: &PairLooming,
     (scan, objects): (&Scan, Option<&PairObjects>),
-    corridor: &Corridor,
+    (corridor, facing): (&Corridor, &FacingLooming),
     config: &EventConfig,
     min_cells: usize,
 ) -> Option<f64> {
@@ -138,7 +138,7 @@ pub fn path_peak_looming(
         ttc_threshold_s: PATH_PEAK_FLOOR_TTC_S.max(config.ttc_threshold_s),
         ..config.clone()
     };
-    let mut candidates = Candidates::find(looming, (scan, objects), &floor, min_cells);
+    let mut candidates = Candidates::find(looming, (scan, objects), (&floor, facing), min_cells);
     // The fastest first: the first that counts is the largest of those that
     // do (describing a cluster takes every cell's offset from the corridor,
     // and the floor finds many slow ones). Only whether it counts is asked:
@@ -154,6 +154,28 @@ pub fn path_peak_looming(
                 .is_some()
         })
         .map(|(_, looming_per_s)| *looming_per_s)
+}
+
+/// Each cell's looming as the events take it ([`event_looming`]) where the
+/// cell may join a cluster (on a surface facing the sensor within the
+/// events' `facing_cos`, with a return), NaN elsewhere: taken once a pair
+/// for both thresholds, the events' ([`hot_clusters`]) and the path peak's
+/// floor ([`path_peak_looming`]), which each took it over every cell.
+pub struct FacingLooming(Vec<f32>);
+
+impl FacingLooming {
+    pub fn of(looming: &PairLooming, config: &EventConfig) -> Self {
+        let facing = |cell: usize| {
+            f64::from(looming.incidence_cos[cell]) >= config.facing_cos
+                && looming.image.point[cell] != NO_POINT
+        };
+        // `event_looming` is an `f32` widened: narrowed back exactly.
+        let of_cell = |cell: usize| match event_looming(looming, cell) {
+            Some(l) if facing(cell) => l as f32,
+            _ => f32::NAN,
+        };
+        Self((0..looming.geometry.cells()).map(of_cell).collect())
+    }
 }
 
 /// One pair's clusters at a threshold before they are described: the
@@ -172,18 +194,17 @@ impl<'a> Candidates<'a> {
     fn find(
         looming: &'a PairLooming,
         (scan, objects): (&'a Scan, Option<&'a PairObjects>),
-        config: &'a EventConfig,
+        (config, facing): (&'a EventConfig, &FacingLooming),
         min_cells: usize,
     ) -> Self {
         let geometry = &looming.geometry;
         let threshold_per_s = 1.0 / config.ttc_threshold_s;
         let candidate_per_s = CANDIDATE_FRACTION * threshold_per_s;
-        let hot: Vec<bool> = (0..geometry.cells())
-            .map(|cell| {
-                event_looming(looming, cell).is_some_and(|l| l >= candidate_per_s)
-                    && f64::from(looming.incidence_cos[cell]) >= config.facing_cos
-                    && looming.image.point[cell] != NO_POINT
-            })
+        // (A NaN, where a cell takes no part, is below any threshold.)
+        let hot: Vec<bool> = facing
+            .0
+            .iter()
+            .map(|&l| f64::from(l) >= candidate_per_s)
             .collect();
         // The threshold first, from the cluster's looming alone: most
         // clusters are below it (the floor's slow surroundings), and

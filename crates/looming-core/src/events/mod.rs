@@ -17,7 +17,9 @@ use crate::model::Scan;
 use crate::model::ScanPair;
 use crate::objects::PairObjects;
 
-pub use cluster::{Cluster, ColSpan, PATH_PEAK_FLOOR_TTC_S, hot_clusters, path_peak_looming};
+pub use cluster::{
+    Cluster, ColSpan, FacingLooming, PATH_PEAK_FLOOR_TTC_S, hot_clusters, path_peak_looming,
+};
 pub use corridor::{Corridor, PathSource};
 pub use merge::{SensorEvents, merge_sensor_events};
 
@@ -286,10 +288,11 @@ impl EventDetector {
             .min_cells
             .unwrap_or_else(|| default_min_cells(&looming.geometry));
         self.min_cells_used = Some(min_cells);
+        let facing = FacingLooming::of(looming, &self.config);
         let clusters = hot_clusters(
             looming,
             (scan, frame.objects),
-            &corridor,
+            (&corridor, &facing),
             &self.config,
             min_cells,
         );
@@ -303,7 +306,7 @@ impl EventDetector {
         let floor = path_peak_looming(
             looming,
             (scan, frame.objects),
-            &corridor,
+            (&corridor, &facing),
             &self.config,
             min_cells,
         );
