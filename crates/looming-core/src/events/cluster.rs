@@ -251,8 +251,11 @@ impl<'a> Candidates<'a> {
                 Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
             })
         };
+        // The cluster's returns, for its centroid and, off any object, its
+        // distance from the path.
+        let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
         let (mut cluster, object) =
-            describe(looming, self.objects, (cells, looming_per_s), &position);
+            describe(looming, self.objects, (cells, looming_per_s), &points);
         // The distance from the path last: it takes every return of the
         // cluster, or of the object it lies on, where the rest is cheap.
         let counts = cluster.rows.1 > cluster.rows.0
@@ -262,10 +265,7 @@ impl<'a> Candidates<'a> {
             return None;
         }
         let half_width_m = self.config.corridor_half_width_m();
-        let within_m = match offset {
-            Offset::Exact => None,
-            Offset::WithinCorridor => Some(half_width_m),
-        };
+        let within_m = offset.within_m(half_width_m);
         cluster.lateral_offset_m = match object {
             // The object's whole footprint: an object in the path counts whole,
             // one beside it never, whichever of its parts is hot.
@@ -279,13 +279,7 @@ impl<'a> Candidates<'a> {
                     &position,
                 )
             }
-            None => nearest_within(
-                cells
-                    .iter()
-                    .filter_map(|&c| position(c))
-                    .map(|p| corridor.offset_m(&p)),
-                within_m,
-            ),
+            None => nearest_within(points.iter().map(|p| corridor.offset_m(p)), within_m),
         };
         (cluster.lateral_offset_m <= half_width_m).then_some(cluster)
     }
@@ -305,6 +299,17 @@ enum Offset {
     /// counts; on a car ahead in the path its twenty predicted positions
     /// took every return again).
     WithinCorridor,
+}
+
+impl Offset {
+    /// The distance the search may stop at, for a corridor `half_width_m`
+    /// either side of the path (none: the exact distance).
+    fn within_m(self, half_width_m: f64) -> Option<f64> {
+        match self {
+            Offset::Exact => None,
+            Offset::WithinCorridor => Some(half_width_m),
+        }
+    }
 }
 
 /// The smallest of `offsets_m`, or the first at most `within_m` where
@@ -437,13 +442,13 @@ fn cluster_looming(looming: &PairLooming, cells: &[usize]) -> f64 {
 }
 
 /// The cluster of hot `cells` whose looming is `looming_per_s`
-/// ([`cluster_looming`]), all but its distance from the path (left
-/// infinite), and the object it lies on.
+/// ([`cluster_looming`]), `points` their returns: all but its distance
+/// from the path (left infinite), and the object it lies on.
 fn describe<'o>(
     looming: &PairLooming,
     objects: Option<&'o PairObjects>,
     (cells, looming_per_s): (&[usize], f64),
-    position: &dyn Fn(usize) -> Option<Vector3<f64>>,
+    points: &[Vector3<f64>],
 ) -> (Cluster, Option<(&'o PairObjects, usize)>) {
     let cols = looming.geometry.cols;
     let mut ranges: Vec<f64> = cells
@@ -460,7 +465,6 @@ fn describe<'o>(
     } else {
         range_m
     };
-    let points: Vec<Vector3<f64>> = cells.iter().filter_map(|&c| position(c)).collect();
     let centroid = points.iter().sum::<Vector3<f64>>() / points.len().max(1) as f64;
     let object = objects.and_then(|o| dominant_object(o, cells));
     let mut occupied: Vec<usize> = cells.iter().map(|&c| c % cols).collect();

@@ -489,7 +489,7 @@ mod tests {
         let mut rng = crate::test_rng::SplitMix64(26);
         let (mut all_kept, mut some_dropped) = (0, 0);
         for _ in 0..5_000 {
-            let n = (rng.uniform(0.0, 9.0)) as usize;
+            let n = rng.uniform(0.0, 9.0) as usize;
             let cos: Vec<f32> = (0..n).map(|_| rng.uniform(0.0, 1.0) as f32).collect();
             let valid: Vec<bool> = (0..n).map(|_| rng.uniform(0.0, 1.0) < 0.8).collect();
             let seen: Vec<bool> = (0..n).map(|_| rng.uniform(0.0, 1.0) < 0.9).collect();
