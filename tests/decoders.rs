@@ -744,18 +744,45 @@ fn padded_rows_and_source_index() {
         ("x", datatype::FLOAT32),
         ("y", datatype::FLOAT32),
         ("z", datatype::FLOAT32),
+        ("intensity", datatype::UINT8),
+        ("ring", datatype::UINT16),
+        ("time", datatype::FLOAT64),
     ];
+    // Point 4 (second row) invalid: each field of the points after it read
+    // from its own point's bytes, across the rows' padding.
     let values: Vec<Vec<f64>> = (0..6)
-        .map(|i| vec![i as f64 + 1.0, 0.0, -(i as f64)])
+        .map(|i| {
+            let x = if i == 4 { f64::NAN } else { i as f64 + 1.0 };
+            vec![
+                x,
+                0.0,
+                -(i as f64),
+                10.0 * i as f64,
+                i as f64,
+                0.25 * i as f64,
+            ]
+        })
         .collect();
     let cloud = custom_cloud(0, &fields, &values, 2, 9, false);
     assert_eq!(cloud.width, 3);
-    assert_eq!(cloud.row_step, 3 * 15 + 9);
+    assert_eq!(cloud.row_step, 3 * cloud.point_step + 9);
     let scan = scan_of(&cloud);
-    let expected: Vec<[f32; 3]> = (0..6).map(|i| [i as f32 + 1.0, 0.0, -(i as f32)]).collect();
+    let kept = [0u32, 1, 2, 3, 5];
+    let expected: Vec<[f32; 3]> = kept
+        .iter()
+        .map(|&i| [i as f32 + 1.0, 0.0, -(i as f32)])
+        .collect();
     assert_eq!(scan.points_m, expected);
-    assert_eq!(scan.source_index, vec![0, 1, 2, 3, 4, 5]);
+    assert_eq!(scan.source_index, kept.to_vec());
     assert_eq!(scan.input_point_count, 6);
+    assert_eq!(scan.skipped_invalid_points, 1);
+    let of_kept = |f: fn(u32) -> f32| kept.iter().map(|&i| f(i)).collect::<Vec<f32>>();
+    assert_eq!(scan.intensity, Some(of_kept(|i| 10.0 * i as f32)));
+    assert_eq!(
+        scan.ring,
+        Some(kept.iter().map(|&i| i as u16).collect::<Vec<_>>())
+    );
+    assert_eq!(scan.time_offset_s, Some(of_kept(|i| 0.25 * i as f32)));
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 use nalgebra::Isometry3;
 
-use super::fields::{FieldReader, Layout, MAX_RING_VALUE, Readers, Scalar};
+use super::fields::{FieldReader, Layout, MAX_RING_VALUE, Readers, Scalar, by_scalar};
 use super::time::TimeToOffset;
 use crate::model::{DroppedRingField, RingSource, ScanLayout};
 use crate::model::{Scan, SensorIds, StampNs};
@@ -90,6 +90,10 @@ impl XyzRead for XyzAny {
 }
 
 /// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
+/// The coordinates first, in one pass; then each other field the cloud has,
+/// in a pass of its own over the points kept, its type matched once per
+/// cloud (per point, the four optional fields' checks and the type's
+/// dispatch were most of the reader's two hundred instructions a point).
 fn extract_with<X: XyzRead>(
     layout: &Layout<'_>,
     xyz: X,
@@ -99,61 +103,39 @@ fn extract_with<X: XyzRead>(
     sensor_pose: Isometry3<f64>,
 ) -> Scan {
     let n = layout.point_count();
-    let mut points_m = Vec::with_capacity(n);
-    let mut source_index = Vec::with_capacity(n);
-    let mut intensity = readers.intensity.map(|_| Vec::with_capacity(n));
-    let mut ring = readers.ring.map(|_| Vec::with_capacity(n));
-    let mut time_offset_s = readers.time.map(|_| Vec::with_capacity(n));
-    let mut sensor_ids = readers.sensor.as_ref().map(|_| Vec::with_capacity(n));
+    let (points_m, source_index, skipped) = valid_points(layout, xyz);
+    let kept = KeptPoints {
+        layout,
+        source_index: &source_index,
+    };
+    let intensity = readers
+        .intensity
+        .map(|f| kept.values(f, |value| value as f32));
+    // A ring value that is negative, fractional or above MAX_RING_VALUE:
+    // the first such, in point order.
+    let mut bad_ring: Option<f64> = None;
+    let mut ring = readers.ring.map(|(f, _)| {
+        kept.values(f, |value| {
+            if (0.0..=MAX_RING_VALUE).contains(&value) && value.fract() == 0.0 {
+                value as u16
+            } else {
+                bad_ring.get_or_insert(value);
+                0
+            }
+        })
+    });
     // A negative sensor value (or one above u32): no sensor field.
     let mut bad_sensor = false;
-    let time_conv = readers
-        .time
-        .map(|(_, conv, _)| TimeToOffset::new(conv, stamp_ns));
-    let mut skipped: u32 = 0;
-    // A ring value that is negative, fractional or above MAX_RING_VALUE.
-    let mut bad_ring: Option<f64> = None;
-
-    let row_bytes = layout.cols * layout.point_step;
-    for r in 0..layout.rows {
-        let start = r * layout.row_step;
-        // Always in bounds: the data length was checked against the layout.
-        let Some(row) = layout.data.get(start..start + row_bytes) else {
-            break;
-        };
-        for (c, p) in row.chunks_exact(layout.point_step).enumerate() {
-            let [x, y, z] = xyz.xyz(p);
-            let finite = x.is_finite() && y.is_finite() && z.is_finite();
-            if !finite || (x == 0.0 && y == 0.0 && z == 0.0) {
-                skipped += 1;
-                continue;
-            }
-            points_m.push([x, y, z]);
-            source_index.push((r * layout.cols + c) as u32);
-            if let (Some(v), Some(f)) = (&mut intensity, &readers.intensity) {
-                v.push(f.read(p) as f32);
-            }
-            if let (Some(v), Some((f, _))) = (&mut ring, &readers.ring) {
-                let value = f.read(p);
-                if (0.0..=MAX_RING_VALUE).contains(&value) && value.fract() == 0.0 {
-                    v.push(value as u16);
-                } else {
-                    bad_ring.get_or_insert(value);
-                    v.push(0);
-                }
-            }
-            if let (Some(v), Some((f, _))) = (&mut sensor_ids, &readers.sensor) {
-                let value = f.read(p);
-                bad_sensor |= !(0.0..=f64::from(u32::MAX)).contains(&value);
-                v.push(value as u32);
-            }
-            if let (Some(v), Some((f, _, _)), Some(conv)) =
-                (&mut time_offset_s, &readers.time, &time_conv)
-            {
-                v.push(conv.offset_s(f.read(p)));
-            }
-        }
-    }
+    let sensor_ids = readers.sensor.as_ref().map(|(f, _)| {
+        kept.values(*f, |value| {
+            bad_sensor |= !(0.0..=f64::from(u32::MAX)).contains(&value);
+            value as u32
+        })
+    });
+    let time_offset_s = readers.time.map(|(f, conv, _)| {
+        let conv = TimeToOffset::new(conv, stamp_ns);
+        kept.values(f, |value| conv.offset_s(value))
+    });
 
     let mut scan_layout = ScanLayout::from_fields(
         readers.ring.map(|(_, name)| name),
@@ -193,4 +175,96 @@ fn sensor_ids_of(ids: Option<Vec<u32>>, readers: &Readers) -> Option<SensorIds> 
         field: field.clone(),
         ids: ids?,
     })
+}
+
+/// Every valid point's coordinates and index in the cloud (row-major),
+/// and how many were dropped (a coordinate not finite, or all three zero).
+fn valid_points<X: XyzRead>(layout: &Layout<'_>, xyz: X) -> (Vec<[f32; 3]>, Vec<u32>, u32) {
+    let n = layout.point_count();
+    let mut points_m = Vec::with_capacity(n);
+    let mut source_index = Vec::with_capacity(n);
+    let mut skipped: u32 = 0;
+    let row_bytes = layout.cols * layout.point_step;
+    for r in 0..layout.rows {
+        let start = r * layout.row_step;
+        // Always in bounds: the data length was checked against the layout.
+        let Some(row) = layout.data.get(start..start + row_bytes) else {
+            break;
+        };
+        for (c, p) in row.chunks_exact(layout.point_step).enumerate() {
+            let [x, y, z] = xyz.xyz(p);
+            let finite = x.is_finite() && y.is_finite() && z.is_finite();
+            if !finite || (x == 0.0 && y == 0.0 && z == 0.0) {
+                skipped += 1;
+                continue;
+            }
+            points_m.push([x, y, z]);
+            source_index.push((r * layout.cols + c) as u32);
+        }
+    }
+    (points_m, source_index, skipped)
+}
+
+/// The points [`valid_points`] kept, for the passes over their other fields.
+struct KeptPoints<'l, 'd> {
+    layout: &'l Layout<'d>,
+    /// Each kept point's index in the cloud (row-major).
+    source_index: &'l [u32],
+}
+
+/// One field's value of each kept point, in order, as
+/// [`FieldReader::read`] takes it (NaN where the bytes are out of bounds,
+/// which the layout's check rules out): the byte order matched once too.
+macro_rules! each_value {
+    ($kept:expr, $field:expr, $convert:expr, $t:ty, $n:literal) => {{
+        let at = $field.offset;
+        if $field.big_endian {
+            $kept.each::<$n, _>(at, |b| <$t>::from_be_bytes(b) as f64, $convert)
+        } else {
+            $kept.each::<$n, _>(at, |b| <$t>::from_le_bytes(b) as f64, $convert)
+        }
+    }};
+}
+
+impl KeptPoints<'_, '_> {
+    /// `convert` of field `field`'s value of each kept point, in order: the
+    /// field's type matched once, each type's loop its own.
+    fn values<T>(&self, field: FieldReader, convert: impl FnMut(f64) -> T) -> Vec<T> {
+        by_scalar!(field.scalar, each_value!(self, field, convert))
+    }
+
+    /// `convert(read(bytes))` of the `N` bytes at `offset` in each kept
+    /// point, in order.
+    #[inline(always)]
+    fn each<const N: usize, T>(
+        &self,
+        offset: usize,
+        read: impl Fn([u8; N]) -> f64,
+        mut convert: impl FnMut(f64) -> T,
+    ) -> Vec<T> {
+        let layout = self.layout;
+        let (data, step, row_step) = (layout.data, layout.point_step, layout.row_step);
+        // Rows without padding: a point's bytes start at its index times
+        // the step (no division per point).
+        let packed = row_step == layout.cols * step;
+        let cols = layout.cols.max(1);
+        let mut values = Vec::with_capacity(self.source_index.len());
+        for &index in self.source_index {
+            let index = index as usize;
+            let start = if packed {
+                index * step
+            } else {
+                (index / cols) * row_step + (index % cols) * step
+            } + offset;
+            let value = match data
+                .get(start..start + N)
+                .and_then(|s| <[u8; N]>::try_from(s).ok())
+            {
+                Some(bytes) => read(bytes),
+                None => f64::NAN,
+            };
+            values.push(convert(value));
+        }
+        values
+    }
 }

@@ -82,6 +82,24 @@ pub(super) struct FieldReader {
     pub(super) big_endian: bool,
 }
 
+/// `$mac!(args.., T, N)` with `T` the Rust type of `$scalar` and `N` its
+/// size in bytes: one arm per type, each its own code.
+macro_rules! by_scalar {
+    ($scalar:expr, $mac:ident!($($args:expr),*)) => {
+        match $scalar {
+            Scalar::I8 => $mac!($($args),*, i8, 1),
+            Scalar::U8 => $mac!($($args),*, u8, 1),
+            Scalar::I16 => $mac!($($args),*, i16, 2),
+            Scalar::U16 => $mac!($($args),*, u16, 2),
+            Scalar::I32 => $mac!($($args),*, i32, 4),
+            Scalar::U32 => $mac!($($args),*, u32, 4),
+            Scalar::F32 => $mac!($($args),*, f32, 4),
+            Scalar::F64 => $mac!($($args),*, f64, 8),
+        }
+    };
+}
+pub(super) use by_scalar;
+
 macro_rules! read_as_f64 {
     ($p:expr, $o:expr, $be:expr, $t:ty, $n:literal) => {{
         // Offsets are validated against point_step, so this never misses; the
@@ -101,16 +119,7 @@ impl FieldReader {
     #[inline(always)]
     pub(super) fn read(&self, point: &[u8]) -> f64 {
         let (o, be) = (self.offset, self.big_endian);
-        match self.scalar {
-            Scalar::I8 => read_as_f64!(point, o, be, i8, 1),
-            Scalar::U8 => read_as_f64!(point, o, be, u8, 1),
-            Scalar::I16 => read_as_f64!(point, o, be, i16, 2),
-            Scalar::U16 => read_as_f64!(point, o, be, u16, 2),
-            Scalar::I32 => read_as_f64!(point, o, be, i32, 4),
-            Scalar::U32 => read_as_f64!(point, o, be, u32, 4),
-            Scalar::F32 => read_as_f64!(point, o, be, f32, 4),
-            Scalar::F64 => read_as_f64!(point, o, be, f64, 8),
-        }
+        by_scalar!(self.scalar, read_as_f64!(point, o, be))
     }
 }
 
