@@ -91,9 +91,10 @@ impl XyzRead for XyzAny {
 
 /// The hot loop: reads every point, drops invalid ones, fills the [`Scan`].
 /// The coordinates first, in one pass; then each other field the cloud has,
-/// in a pass of its own over the points kept, its type matched once per
-/// cloud (per point, the four optional fields' checks and the type's
-/// dispatch were most of the reader's two hundred instructions a point).
+/// in a pass of its own over the points kept, its type and byte order
+/// matched once per cloud (one loop checked each optional field and matched
+/// its type at every point: 280 instructions a point on the synthetic
+/// sensor's six fields, 180 in passes).
 fn extract_with<X: XyzRead>(
     layout: &Layout<'_>,
     xyz: X,

@@ -364,11 +364,6 @@ mod tests {
         assert_eq!(bias.update(None, 3), vec![0.02, -0.02, 0.02]);
     }
 
-    /// A sensor 1.33 m above a road ringed by a wall 8.5 m away (the side
-    /// sensor of `synth --lidars 3` passing a building): 32 beams from -25
-    /// to +15 degrees, no laser offsets. The road meets the wall between
-    /// two rows, whose returns lie in one chamfer plane; the rows beyond
-    /// (checked) keep the crease from reading as offsets of the rows at it.
     /// The estimate on `scan`'s returns, `rings` their lasers, the image
     /// `cols` columns wide.
     fn estimate_on(mut scan: Scan, rings: Vec<u16>, cols: usize) -> Vec<f64> {
@@ -383,6 +378,11 @@ mod tests {
         estimate(&scan, &image, &geometry).unwrap()
     }
 
+    /// A sensor 1.33 m above a road ringed by a wall 8.5 m away (the side
+    /// sensor of `synth --lidars 3` passing a building): 32 beams from -25
+    /// to +15 degrees, no laser offsets. The road meets the wall between
+    /// two rows, whose returns lie in one chamfer plane; the rows beyond
+    /// (checked) keep the crease from reading as offsets of the rows at it.
     #[test]
     fn a_crease_between_the_rows_beside_reads_no_offset() {
         let (beams, cols, height, wall) = (32u16, 512usize, 1.33f64, 8.5f64);
@@ -413,7 +413,8 @@ mod tests {
     /// A room seen by 32 lasers, each reading long by its own offset (a
     /// staircase of period three, as KITTI's rings): the scan's estimate
     /// finds each laser's offset against the others' (the differences
-    /// between neighbours, which looming sees), 6 cm apart, within 2.5 cm each and 5 mm on the mean.
+    /// between neighbours, which looming sees, 6 cm apart) within 2.5 cm
+    /// each and 5 mm on the mean.
     #[test]
     fn each_lasers_offset_is_found_on_a_room() {
         let (beams, cols) = (32u16, 512usize);
