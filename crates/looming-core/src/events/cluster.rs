@@ -161,7 +161,12 @@ pub fn path_peak_looming(
 /// events' `facing_cos`, with a return), NaN elsewhere: taken once a pair
 /// for both thresholds, the events' ([`hot_clusters`]) and the path peak's
 /// floor ([`path_peak_looming`]), which each took it over every cell.
-pub struct FacingLooming(Vec<f32>);
+pub struct FacingLooming {
+    looming_per_s: Vec<f32>,
+    /// The `facing_cos` it was taken with: the configs it serves hold the
+    /// same (they differ in their threshold only).
+    facing_cos: f64,
+}
 
 impl FacingLooming {
     pub fn of(looming: &PairLooming, config: &EventConfig) -> Self {
@@ -174,7 +179,10 @@ impl FacingLooming {
             Some(l) if facing(cell) => l as f32,
             _ => f32::NAN,
         };
-        Self((0..looming.geometry.cells()).map(of_cell).collect())
+        Self {
+            looming_per_s: (0..looming.geometry.cells()).map(of_cell).collect(),
+            facing_cos: config.facing_cos,
+        }
     }
 }
 
@@ -200,9 +208,13 @@ impl<'a> Candidates<'a> {
         let geometry = &looming.geometry;
         let threshold_per_s = 1.0 / config.ttc_threshold_s;
         let candidate_per_s = CANDIDATE_FRACTION * threshold_per_s;
+        debug_assert_eq!(
+            facing.facing_cos, config.facing_cos,
+            "FacingLooming taken with another config's facing_cos"
+        );
         // (A NaN, where a cell takes no part, is below any threshold.)
         let hot: Vec<bool> = facing
-            .0
+            .looming_per_s
             .iter()
             .map(|&l| f64::from(l) >= candidate_per_s)
             .collect();
