@@ -228,11 +228,14 @@ fn azimuth_turns(points: &[[f32; 3]]) -> Vec<Option<f64>> {
     points.par_iter().map(azimuth_turn).collect()
 }
 
-/// Azimuth `atan2(y, x)` in turns, `None` for a point without one.
+/// Azimuth `atan2(y, x)` in turns, `None` for a point without one. The
+/// engine's [`atan2`](crate::engine::atan::atan2) (within 1e-12 rad of
+/// libm's, 2e-13 of a turn): libm's was 1 % of a KITTI run, a call per
+/// point of every scan.
 fn azimuth_turn(p: &[f32; 3]) -> Option<f64> {
     let [x, y, z] = *p;
     let has = x.is_finite() && y.is_finite() && z.is_finite() && (x != 0.0 || y != 0.0);
-    has.then(|| f64::from(y).atan2(f64::from(x)) / TAU)
+    has.then(|| crate::engine::atan::atan2(f64::from(y), f64::from(x)) / TAU)
 }
 
 /// Wraps a difference of turns into [-0.5, 0.5).
