@@ -23,48 +23,28 @@ pub(super) fn fill_dropouts(
 ) -> Proxies {
     let (rows, cols) = (geometry.rows, geometry.cols);
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
-    let mut bridged_row = vec![false; rows];
     let sparse = !vertices.normal.is_empty();
-    // Column by column, each column's rows in turn: every row is still
-    // taken left to right (a bridged vertex may be the left end of the
-    // next bridge; rows share nothing), and the dropouts' vertices and
-    // their neighbours' are read from three neighbouring columns of the
-    // column-major buffers, where row by row each dropout's lay a column
-    // (3 KiB at 64 rows) from the last one's.
-    let range_cols = &source.columns.range_m;
-    for col in 0..cols {
-        let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
-        for (row, bridged) in bridged_row.iter_mut().enumerate() {
-            let at = col * rows + row;
-            if range_cols[at].is_finite() || vertices.at[at].is_some() {
-                continue;
-            }
-            let cell = row * cols + col;
-            let (left, right) = (row * cols + left_col, row * cols + right_col);
-            let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
-            let (Some(a), Some(b)) = (vertices.at[left_at].some(), vertices.at[right_at].some())
-            else {
-                continue;
-            };
-            // The source's plan bridged this dropout between these two
-            // cells only where they lie on one surface (`BridgedMesh`).
-            let planned = source.bridged.proxy.get(cell) == Some(&(left as u32));
-            if (a.col - b.col).abs() > MAX_BRIDGE_COLS
-                || !(planned || same_surface(source.surfaces, left, right))
-            {
-                continue;
-            }
-            vertices.at[at] = Vertex {
-                position: Point3::from((a.position.coords + b.position.coords) * 0.5),
-                row: 0.5 * (a.row + b.row),
-                col: 0.5 * (a.col + b.col),
-                time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
-            };
+    // Each row's bridges found on rayon's workers (on one core, the other
+    // waited), then written. Rows share nothing, and a bridge reads only
+    // vertices the source had, as one pass left to right along each row
+    // did: a dropout bridged there had a vertex on its right, so the next
+    // column, no dropout, bridged nothing on it (and across the seam the
+    // neighbours land a whole image apart: no bridge).
+    let found = &*vertices;
+    let bridges: Vec<Vec<Bridge>> = (0..rows)
+        .into_par_iter()
+        .map(|row| row_bridges(source, (rows, cols), found, row))
+        .collect();
+    let mut bridged_row = vec![false; rows];
+    for (row, bridges) in bridges.iter().enumerate() {
+        bridged_row[row] = !bridges.is_empty();
+        for bridge in bridges {
+            let (at, (left_at, right_at)) = (bridge.col * rows + row, bridge.neighbours_at);
+            vertices.at[at] = bridge.vertex;
             if sparse {
                 vertices.normal[at] = (vertices.normal[left_at] + vertices.normal[right_at]) * 0.5;
             }
-            proxy[cell] = left as u32;
-            *bridged = true;
+            proxy[row * cols + bridge.col] = bridge.left as u32;
         }
     }
     // Rows bridged as the source planned (most), whose quads take the
@@ -81,6 +61,62 @@ pub(super) fn fill_dropouts(
         bridged_row,
         as_planned,
     }
+}
+
+/// A dropout of a row bridged by [`fill_dropouts`]: its column, the vertex
+/// between its neighbours, the cell of its left neighbour (whose surface
+/// it stands for), and both neighbours' indices in the column-major
+/// buffers.
+struct Bridge {
+    col: usize,
+    vertex: Vertex,
+    left: usize,
+    neighbours_at: (usize, usize),
+}
+
+/// The bridges of `row`'s dropouts, left to right (the vertices stored
+/// column-major, `rows` a column).
+fn row_bridges(
+    source: &Source,
+    (rows, cols): (usize, usize),
+    vertices: &Vertices,
+    row: usize,
+) -> Vec<Bridge> {
+    let range_cols = &source.columns.range_m;
+    let mut bridges = Vec::new();
+    for col in 0..cols {
+        let at = col * rows + row;
+        if range_cols[at].is_finite() || vertices.at[at].is_some() {
+            continue;
+        }
+        let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+        let cell = row * cols + col;
+        let (left, right) = (row * cols + left_col, row * cols + right_col);
+        let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
+        let (Some(a), Some(b)) = (vertices.at[left_at].some(), vertices.at[right_at].some()) else {
+            continue;
+        };
+        // The source's plan bridged this dropout between these two
+        // cells only where they lie on one surface (`BridgedMesh`).
+        let planned = source.bridged.proxy.get(cell) == Some(&(left as u32));
+        if (a.col - b.col).abs() > MAX_BRIDGE_COLS
+            || !(planned || same_surface(source.surfaces, left, right))
+        {
+            continue;
+        }
+        bridges.push(Bridge {
+            col,
+            vertex: Vertex {
+                position: Point3::from((a.position.coords + b.position.coords) * 0.5),
+                row: 0.5 * (a.row + b.row),
+                col: 0.5 * (a.col + b.col),
+                time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
+            },
+            left,
+            neighbours_at: (left_at, right_at),
+        });
+    }
+    bridges
 }
 
 /// How far apart, in columns, a dropout's two neighbours may land and be
