@@ -24,28 +24,34 @@ pub(super) fn fill_dropouts(
     let (rows, cols) = (geometry.rows, geometry.cols);
     let mut proxy: Vec<u32> = (0..geometry.cells() as u32).collect();
     let sparse = !vertices.normal.is_empty();
-    // Each row's bridges found on rayon's workers (on one core, the other
+    // The rows' bridges found on rayon's workers (on one core, the other
     // waited), then written. Rows share nothing, and a bridge reads only
     // vertices the source had, as one pass left to right along each row
     // did: a dropout bridged there had a vertex on its right, so the next
     // column, no dropout, bridged nothing on it (and across the seam the
     // neighbours land a whole image apart: no bridge).
     let found = &*vertices;
-    let bridges: Vec<Vec<Bridge>> = (0..rows)
+    // Bands of rows, each taken column by column: a column's rows of a
+    // band lie side by side in the column-major buffers.
+    let bands: Vec<Vec<Bridge>> = (0..rows)
+        .step_by(BRIDGE_BAND_ROWS)
+        .collect::<Vec<_>>()
         .into_par_iter()
-        .map(|row| row_bridges(source, (rows, cols), found, row))
+        .map(|first| {
+            let band = first..(first + BRIDGE_BAND_ROWS).min(rows);
+            band_bridges(source, (rows, cols), found, band)
+        })
         .collect();
     let mut bridged_row = vec![false; rows];
-    for (row, bridges) in bridges.iter().enumerate() {
-        bridged_row[row] = !bridges.is_empty();
-        for bridge in bridges {
-            let (at, (left_at, right_at)) = (bridge.col * rows + row, bridge.neighbours_at);
-            vertices.at[at] = bridge.vertex;
-            if sparse {
-                vertices.normal[at] = (vertices.normal[left_at] + vertices.normal[right_at]) * 0.5;
-            }
-            proxy[row * cols + bridge.col] = bridge.left as u32;
+    for bridge in bands.iter().flatten() {
+        let (row, (left_at, right_at)) = (bridge.row, bridge.neighbours_at);
+        let at = bridge.col * rows + row;
+        bridged_row[row] = true;
+        vertices.at[at] = bridge.vertex;
+        if sparse {
+            vertices.normal[at] = (vertices.normal[left_at] + vertices.normal[right_at]) * 0.5;
         }
+        proxy[row * cols + bridge.col] = bridge.left as u32;
     }
     // Rows bridged as the source planned (most), whose quads take the
     // plan's table (`BridgedMesh`).
@@ -63,61 +69,77 @@ pub(super) fn fill_dropouts(
     }
 }
 
-/// A dropout of a row bridged by [`fill_dropouts`]: its column, the vertex
+/// A dropout bridged by [`fill_dropouts`]: its row and column, the vertex
 /// between its neighbours, the cell of its left neighbour (whose surface
 /// it stands for), and both neighbours' indices in the column-major
 /// buffers.
 struct Bridge {
+    row: usize,
     col: usize,
     vertex: Vertex,
     left: usize,
     neighbours_at: (usize, usize),
 }
 
-/// The bridges of `row`'s dropouts, left to right (the vertices stored
-/// column-major, `rows` a column).
-fn row_bridges(
+/// The bridges of the dropouts of the rows `band`, each row's left to
+/// right (the vertices stored column-major, `rows` a column).
+fn band_bridges(
     source: &Source,
     (rows, cols): (usize, usize),
     vertices: &Vertices,
-    row: usize,
+    band: std::ops::Range<usize>,
 ) -> Vec<Bridge> {
-    let range_cols = &source.columns.range_m;
     let mut bridges = Vec::new();
     for col in 0..cols {
-        let at = col * rows + row;
-        if range_cols[at].is_finite() || vertices.at[at].is_some() {
-            continue;
+        for row in band.clone() {
+            if let Some(bridge) = bridge_at(source, (rows, cols), vertices, (row, col)) {
+                bridges.push(bridge);
+            }
         }
-        let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
-        let cell = row * cols + col;
-        let (left, right) = (row * cols + left_col, row * cols + right_col);
-        let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
-        let (Some(a), Some(b)) = (vertices.at[left_at].some(), vertices.at[right_at].some()) else {
-            continue;
-        };
-        // The source's plan bridged this dropout between these two
-        // cells only where they lie on one surface (`BridgedMesh`).
-        let planned = source.bridged.proxy.get(cell) == Some(&(left as u32));
-        if (a.col - b.col).abs() > MAX_BRIDGE_COLS
-            || !(planned || same_surface(source.surfaces, left, right))
-        {
-            continue;
-        }
-        bridges.push(Bridge {
-            col,
-            vertex: Vertex {
-                position: Point3::from((a.position.coords + b.position.coords) * 0.5),
-                row: 0.5 * (a.row + b.row),
-                col: 0.5 * (a.col + b.col),
-                time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
-            },
-            left,
-            neighbours_at: (left_at, right_at),
-        });
     }
     bridges
 }
+
+/// The bridge of the cell at (`row`, `col`), where it is a dropout between
+/// two vertices on one surface.
+fn bridge_at(
+    source: &Source,
+    (rows, cols): (usize, usize),
+    vertices: &Vertices,
+    (row, col): (usize, usize),
+) -> Option<Bridge> {
+    let at = col * rows + row;
+    if source.columns.range_m[at].is_finite() || vertices.at[at].is_some() {
+        return None;
+    }
+    let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+    let (left, right) = (row * cols + left_col, row * cols + right_col);
+    let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
+    let (a, b) = (vertices.at[left_at].some()?, vertices.at[right_at].some()?);
+    // The source's plan bridged this dropout between these two cells
+    // only where they lie on one surface (`BridgedMesh`).
+    let planned = source.bridged.proxy.get(row * cols + col) == Some(&(left as u32));
+    if (a.col - b.col).abs() > MAX_BRIDGE_COLS
+        || !(planned || same_surface(source.surfaces, left, right))
+    {
+        return None;
+    }
+    Some(Bridge {
+        row,
+        col,
+        vertex: Vertex {
+            position: Point3::from((a.position.coords + b.position.coords) * 0.5),
+            row: 0.5 * (a.row + b.row),
+            col: 0.5 * (a.col + b.col),
+            time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
+        },
+        left,
+        neighbours_at: (left_at, right_at),
+    })
+}
+
+/// Rows of a task of [`fill_dropouts`]: 8 tasks at 64 rows.
+const BRIDGE_BAND_ROWS: usize = 8;
 
 /// How far apart, in columns, a dropout's two neighbours may land and be
 /// bridged (further: across the seam of the sweep).
