@@ -9,7 +9,7 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use crate::annotate::OwnMessage;
 use crate::budget::{ByteBudget, Ticket};
 use crate::input::{Catalog, CopiedRecord, CopyEvent, Flow, InputFile, InputRecord, ReadReport};
-use crate::model::Decoded;
+use crate::model::{Decoded, ScanPair};
 use crate::output::{Copied, OutputWriter, WriteMode};
 use crate::topics::TopicSelection;
 
@@ -349,7 +349,7 @@ fn pair_scans(
 /// writer is gone. Without an annotation, nothing to do.
 fn emit(
     annotation: &mut Option<Annotation>,
-    pairs: Vec<(usize, crate::model::ScanPair)>,
+    pairs: Vec<(usize, ScanPair)>,
     tx: &SyncSender<ToWriter>,
 ) -> bool {
     annotation

@@ -5,7 +5,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::{Source, Vertex, Vertices};
+use super::{Source, Vertex, Vertices, row_bands};
 use crate::engine::grid::ImageGeometry;
 use crate::engine::surface::Surfaces;
 
@@ -33,14 +33,8 @@ pub(super) fn fill_dropouts(
     let found = &*vertices;
     // Bands of rows, each taken column by column: a column's rows of a
     // band lie side by side in the column-major buffers.
-    let bands: Vec<Vec<Bridge>> = (0..rows)
-        .step_by(BRIDGE_BAND_ROWS)
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map(|first| {
-            let band = first..(first + BRIDGE_BAND_ROWS).min(rows);
-            band_bridges(source, (rows, cols), found, band)
-        })
+    let bands: Vec<Vec<Bridge>> = row_bands(rows)
+        .map(|band| band_bridges(source, (rows, cols), found, band))
         .collect();
     let mut bridged_row = vec![false; rows];
     for bridge in bands.iter().flatten() {
@@ -137,9 +131,6 @@ fn bridge_at(
         neighbours_at: (left_at, right_at),
     })
 }
-
-/// Rows of a task of [`fill_dropouts`]: 8 tasks at 64 rows.
-const BRIDGE_BAND_ROWS: usize = 8;
 
 /// How far apart, in columns, a dropout's two neighbours may land and be
 /// bridged (further: across the seam of the sweep).

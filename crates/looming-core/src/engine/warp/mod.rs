@@ -152,8 +152,17 @@ impl Reach {
     }
 }
 
-/// Rows of a task of [`Bands::of`].
-const REACH_BAND_ROWS: usize = 8;
+/// Rows of a task of [`Bands::of`] and `fill_dropouts`: 8 tasks at 64
+/// rows.
+const BAND_ROWS: usize = 8;
+
+/// The image's `rows` in bands of [`BAND_ROWS`], on rayon's workers, in
+/// order.
+fn row_bands(rows: usize) -> impl IndexedParallelIterator<Item = std::ops::Range<usize>> {
+    (0..rows.div_ceil(BAND_ROWS))
+        .into_par_iter()
+        .map(move |band| band * BAND_ROWS..((band + 1) * BAND_ROWS).min(rows))
+}
 
 /// The reaches of the rows `band` (one each, in order), and of every column
 /// over those rows, from the occupied cells' `coords` (an image `cols`
@@ -193,14 +202,8 @@ impl Bands {
         // the synthetic drive's 968 idle samples, `perf -a`), each with its
         // rows' reaches and its columns' over its rows; the columns' then
         // taken over the bands (the same maxima in another order).
-        let bands: Vec<(Vec<Reach>, Vec<Reach>)> = (0..rows)
-            .step_by(REACH_BAND_ROWS)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|first| {
-                let band = first..(first + REACH_BAND_ROWS).min(rows);
-                band_reaches(surfaces, coords, cols, band)
-            })
+        let bands: Vec<(Vec<Reach>, Vec<Reach>)> = row_bands(rows)
+            .map(|band| band_reaches(surfaces, coords, cols, band))
             .collect();
         let mut col_reach = vec![Reach::NONE; cols];
         let mut row_reach = Vec::with_capacity(rows);
@@ -592,11 +595,12 @@ mod bands_tests {
     #[test]
     fn bands_of_rows_reach_as_one_pass() {
         let (rows, cols) = (20, 64);
+        let cells = rows * cols;
         let mut rng = SplitMix64(0x51_7cc1_b727_220a);
         let mut unit = || rng.uniform(0.0, 1.0);
-        let mut range_m = vec![f32::NAN; rows * cols];
-        let mut coords = vec![(0.0f32, 0.0f32); rows * cols];
-        for cell in 0..rows * cols {
+        let mut range_m = vec![f32::NAN; cells];
+        let mut coords = vec![(0.0f32, 0.0f32); cells];
+        for cell in 0..cells {
             let (row, col) = (cell / cols, cell % cols);
             if unit() < 0.1 {
                 continue;
@@ -611,18 +615,13 @@ mod bands_tests {
             let col_f = (col as f64 + 0.6 * unit() - 0.3 + 2.0 * stray).rem_euclid(cols as f64);
             coords[cell] = (row_f as f32, col_f as f32);
         }
-        let mut surfaces = crate::engine::warp::test_surfaces::wall(
-            rows,
+        let surfaces = Surfaces::hand_made(
+            range_m,
+            vec![[1.0, 0.0, 0.0]; cells],
+            vec![[0.0; 3]; cells],
+            vec![0.01; rows],
             cols,
-            3,
-            &crate::engine::warp::test_surfaces::Pattern {
-                empty: |_| false,
-                step: |_| false,
-                no_normal: |_| false,
-                edge: |_| false,
-            },
         );
-        surfaces.range_m = range_m;
         let bands = Bands::of(&surfaces, &coords);
         let (mut row_reach, mut col_reach) = (vec![Reach::NONE; rows], vec![Reach::NONE; cols]);
         for (cell, &(row_f, col_f)) in coords.iter().enumerate() {
