@@ -273,6 +273,8 @@ pub(crate) fn threat_cloud(scan: &Scan, looming: &PairLooming) -> PointCloud {
 /// cannot hold make the encoder fail in memory).
 #[derive(Debug, thiserror::Error)]
 pub enum RangeImageError {
+    #[error("range image of {cells} cells with values for {values} of them")]
+    Cells { cells: usize, values: usize },
     #[error("range image of {rows} x {cols} cells: too large for a PNG")]
     TooLarge { rows: usize, cols: usize },
     #[error("range image of {rows} x {cols} cells: PNG encoding failed: {source}")]
@@ -308,25 +310,40 @@ pub fn range_image(
 ) -> Result<CompressedImage, RangeImageError> {
     let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
     let scale = image_row_scale(rows, cols);
-    let mut indexes = Vec::with_capacity(rows * scale * cols);
-    for image_row in 0..rows {
-        // Row 0 of the engine is the lowest beam.
-        let row = rows - 1 - image_row;
-        let start = indexes.len();
-        for image_col in 0..cols {
-            // Engine columns run clockwise from behind, so the left is at
-            // small column numbers: already the driver's view.
-            let cell = row * cols + image_col;
-            indexes.push(if looming.image.point[cell] == crate::engine::NO_POINT {
-                colour::EMPTY_INDEX
-            } else if looming.mask[cell] != 0 {
+    let cells = rows * cols;
+    let (points, mask) = (&looming.image.point, &looming.mask);
+    if points.len() < cells || mask.len() < cells || values.len() < cells {
+        return Err(RangeImageError::Cells {
+            cells,
+            values: values.len().min(points.len()).min(mask.len()),
+        });
+    }
+    // Each image row written whole from its cells (no push, no branch per
+    // cell: the pushes' checks and branches were most of this function's
+    // time), then repeated `scale` times.
+    let mut indexes = vec![0u8; rows * scale * cols];
+    for (image_row, pixels) in indexes.chunks_exact_mut(scale * cols).enumerate() {
+        // Row 0 of the engine is the lowest beam. Engine columns run
+        // clockwise from behind, so the left is at small column numbers:
+        // already the driver's view.
+        let row = (rows - 1 - image_row) * cols..(rows - image_row) * cols;
+        let (first, repeats) = pixels.split_at_mut(cols);
+        let of_row = points[row.clone()].iter().zip(&mask[row.clone()]);
+        for (pixel, ((&point, &bits), &value)) in first.iter_mut().zip(of_row.zip(&values[row])) {
+            let index = colour::looming_index(value);
+            let index = if bits != 0 {
                 colour::MASKED_INDEX
             } else {
-                colour::looming_index(values[cell])
-            });
+                index
+            };
+            *pixel = if point == crate::engine::NO_POINT {
+                colour::EMPTY_INDEX
+            } else {
+                index
+            };
         }
-        for _ in 1..scale {
-            indexes.extend_from_within(start..start + cols);
+        for repeat in repeats.chunks_exact_mut(cols) {
+            repeat.copy_from_slice(first);
         }
     }
     Ok(CompressedImage {
