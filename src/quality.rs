@@ -837,6 +837,25 @@ mod tests {
         assert_eq!(q.ground.median_abs_fused_per_s, None);
     }
 
+    /// An empty cell is not occupied, whatever other bits it carries: its
+    /// bits count in no mask.
+    #[test]
+    fn an_empty_cells_other_bits_count_in_no_mask() {
+        let mut cells = Cells::new();
+        cells.push([10.0, 0.0, 0.5], FACING, 0, 0.1, 0.0);
+        cells.push([10.0, 1.0, 0.5], FACING, mask::NO_PREVIOUS, 0.1, 0.0);
+        let empty = mask::EMPTY | mask::NO_PREVIOUS | mask::EDGE;
+        cells.push([12.0, 2.0, 0.5], FACING, empty, f32::NAN, f32::NAN);
+        let (looming, scan) = cells.build(true);
+        let q = PairQuality::measure(&looming, &scan);
+        assert_eq!((q.cells, q.trusted_cells), (2, 1));
+        let no_previous_only = MaskCounts {
+            no_previous: 1,
+            ..MaskCounts::default()
+        };
+        assert_eq!(q.masked_cells, no_previous_only);
+    }
+
     #[test]
     fn without_ego_velocity_there_is_no_d_figure() {
         let mut cells = Cells::new();

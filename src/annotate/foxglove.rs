@@ -582,6 +582,37 @@ mod tests {
         }
     }
 
+    /// A pair of the synthetic straight road at 16 x 256 and its result.
+    fn small_pair() -> (crate::model::ScanPair, PairLooming) {
+        let mut scenario = crate::synth::scene::load("straight-road").unwrap();
+        (scenario.lidar.beams, scenario.lidar.columns) = (16, 256);
+        let world = crate::synth::sensor::World::new(scenario);
+        let pair = crate::synth::simulated_pair(&world, 3, 1);
+        let looming = crate::engine::compute(&pair, &Default::default()).expect("an image");
+        (pair, looming)
+    }
+
+    #[test]
+    fn a_range_image_repeats_each_beam_row_and_fails_on_short_values() {
+        let (pair, looming) = small_pair();
+        let (rows, cols) = (looming.geometry.rows, looming.geometry.cols);
+        let image = range_image(&pair.current, &looming, &looming.fused).unwrap();
+        let decoded = image::load_from_memory_with_format(&image.data, image::ImageFormat::Png)
+            .unwrap()
+            .to_rgb8();
+        let scale = image_row_scale(rows, cols);
+        assert_eq!(
+            (decoded.width(), decoded.height()),
+            (cols as u32, (rows * scale) as u32)
+        );
+        let short = &looming.fused[..rows * cols - 1];
+        let error = range_image(&pair.current, &looming, short).unwrap_err();
+        assert!(
+            matches!(error, RangeImageError::Cells { cells, values } if cells == rows * cols && values == cells - 1),
+            "{error}"
+        );
+    }
+
     #[test]
     fn dimensions_no_png_holds_are_errors() {
         let wide = indexed_png(1, u32::MAX as usize + 1, &[]);

@@ -447,8 +447,9 @@ impl Annotator {
         ] {
             match image {
                 Ok(image) => self.push(channel, log_time_ns, image.encode_to_vec(), out),
-                // Only dimensions no PNG holds fail: the pair's other
-                // channels are still worth writing, so count and go on.
+                // Only dimensions no PNG holds (or a result whose cells
+                // are not the image's) fail: the pair's other channels are
+                // still worth writing, so count and go on.
                 Err(_) => self.stats.images_not_encoded += 1,
             }
         }

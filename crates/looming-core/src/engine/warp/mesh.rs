@@ -361,7 +361,8 @@ fn planes_on_one(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::warp::test_surfaces::{Pattern, wall};
+    use crate::engine::warp::test_surfaces::{Pattern, flat_geometry, wall};
+    use crate::engine::warp::{Source, mesh_joins};
 
     /// `mesh_joins` as it was: the edges' table, then each quad's bits
     /// from it in a table of their own, added to it.
@@ -437,6 +438,146 @@ mod tests {
                     assert!(joined > 0 && joined < cells, "bit {bit}: {joined}");
                 }
             }
+        }
+    }
+
+    /// The one pass `fill_dropouts` took before its rows were found apart:
+    /// column by column, each column's rows in turn, every bridge written
+    /// as it was found (the reference its row-parallel form is held to).
+    fn one_pass(
+        source: &Source,
+        (rows, cols): (usize, usize),
+        vertices: &mut Vertices,
+    ) -> Vec<u32> {
+        let mut proxy: Vec<u32> = (0..(rows * cols) as u32).collect();
+        for col in 0..cols {
+            let (left_col, right_col) = ((col + cols - 1) % cols, (col + 1) % cols);
+            for row in 0..rows {
+                let at = col * rows + row;
+                if source.columns.range_m[at].is_finite() || vertices.at[at].is_some() {
+                    continue;
+                }
+                let (left, right) = (row * cols + left_col, row * cols + right_col);
+                let (left_at, right_at) = (left_col * rows + row, right_col * rows + row);
+                let (Some(a), Some(b)) =
+                    (vertices.at[left_at].some(), vertices.at[right_at].some())
+                else {
+                    continue;
+                };
+                let planned = source.bridged.proxy.get(row * cols + col) == Some(&(left as u32));
+                if (a.col - b.col).abs() > MAX_BRIDGE_COLS
+                    || !(planned || same_surface(source.surfaces, left, right))
+                {
+                    continue;
+                }
+                vertices.at[at] = Vertex {
+                    position: Point3::from((a.position.coords + b.position.coords) * 0.5),
+                    row: 0.5 * (a.row + b.row),
+                    col: 0.5 * (a.col + b.col),
+                    time_ns: a.time_ns + (b.time_ns - a.time_ns) / 2,
+                };
+                proxy[row * cols + col] = left as u32;
+            }
+        }
+        proxy
+    }
+
+    /// Each return's vertex near its cell, one in 19 four columns off, one
+    /// in 23 missing (a return that landed across the seam); column-major.
+    fn vertices_near(
+        surfaces: &Surfaces,
+        (rows, cols): (usize, usize),
+        time_ns: &[i64],
+    ) -> Vec<Vertex> {
+        (0..rows * cols)
+            .map(|k| {
+                let (col, row) = (k / rows, k % rows);
+                let cell = row * cols + col;
+                if !surfaces.range_m[cell].is_finite() || cell % 23 == 5 {
+                    return Vertex::NONE;
+                }
+                let shift = if cell % 19 == 1 {
+                    4.0
+                } else {
+                    0.01 * (cell % 7) as f64
+                };
+                Vertex {
+                    position: Point3::new(
+                        10.0,
+                        0.1 * col as f64,
+                        0.2 * row as f64 + 0.001 * k as f64,
+                    ),
+                    row: row as f64 + 0.02,
+                    col: col as f64 + shift,
+                    time_ns: time_ns[cell] + 37,
+                }
+            })
+            .collect()
+    }
+
+    /// Rows found apart bridge the same dropouts with the same vertices as
+    /// the one pass, bit for bit: dropouts in the first and last columns
+    /// (their neighbours land a whole image apart: none), next to each
+    /// other (none), beside a return without a vertex (none), whose
+    /// neighbours land columns apart (none), and the rest.
+    #[test]
+    fn rows_found_apart_bridge_as_one_pass() {
+        let (rows, cols) = (9, 64);
+        let pattern = Pattern {
+            // The first column of even rows and the last of odd rows (the
+            // seam), and pairs of neighbours, empty.
+            empty: |k| {
+                let (row, col) = (k / 64, k % 64);
+                (col == 0 && row % 2 == 0)
+                    || (col == 63 && row % 2 == 1)
+                    || k % 13 == 4
+                    || matches!(k % 31, 7 | 8)
+            },
+            step: |k| k % 13 == 9,
+            no_normal: |k| k % 11 == 2,
+            edge: |k| k % 17 == 3,
+        };
+        let mut surfaces = wall(rows, cols, 0x2545_f491_4f6c_dd1d, &pattern);
+        surfaces.joins = mesh_joins(&surfaces, rows, cols);
+        let time_ns: Vec<i64> = (0..rows * cols).map(|k| 1_000 * k as i64).collect();
+        let source = Source::new(&surfaces, &time_ns);
+        let geometry = flat_geometry(rows, cols);
+        let at = vertices_near(&surfaces, (rows, cols), &time_ns);
+        let mut vertices = Vertices {
+            rows,
+            at: at.clone(),
+            normal: Vec::new(),
+        };
+        let mut reference = Vertices {
+            rows,
+            at,
+            normal: Vec::new(),
+        };
+        let proxies = fill_dropouts(&source, &geometry, &mut vertices);
+        let proxy = one_pass(&source, (rows, cols), &mut reference);
+        assert_eq!(proxies.cell, proxy);
+        let bits = |v: &Vertex| {
+            v.some().map(|v| {
+                (
+                    v.position.coords.map(f64::to_bits),
+                    v.row.to_bits(),
+                    v.col.to_bits(),
+                    v.time_ns,
+                )
+            })
+        };
+        let bridged = proxy
+            .iter()
+            .enumerate()
+            .filter(|&(k, &p)| p as usize != k)
+            .count();
+        assert!(bridged > 20, "{bridged} bridged");
+        for (k, (got, want)) in vertices.at.iter().zip(&reference.at).enumerate() {
+            assert_eq!(bits(got), bits(want), "vertex {k}");
+        }
+        for row in 0..rows {
+            let any = (0..cols).any(|c| proxy[row * cols + c] as usize != row * cols + c);
+            assert_eq!(proxies.bridged_row[row], any, "row {row}");
         }
     }
 }

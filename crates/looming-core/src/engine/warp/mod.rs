@@ -513,7 +513,20 @@ struct Candidate {
 #[cfg(test)]
 pub(super) mod test_surfaces {
     use super::Surfaces;
+    use crate::engine::beams::BeamTable;
+    use crate::engine::grid::ImageGeometry;
     use crate::test_rng::SplitMix64;
+
+    /// A 0.11 rad tall image of `rows` beams by `cols` columns.
+    pub(in crate::engine::warp) fn flat_geometry(rows: usize, cols: usize) -> ImageGeometry {
+        ImageGeometry {
+            rows,
+            cols,
+            beams: BeamTable::uniform(rows, -0.05, 0.11),
+            ring_to_row: None,
+            parallax_rad_m: None,
+        }
+    }
 
     /// The unit direction at `azimuth` and `elevation`, radians.
     pub(in crate::engine::warp) fn unit(azimuth: f64, elevation: f64) -> [f32; 3] {
