@@ -10,6 +10,7 @@
 //! so a failed run never leaves a half-written log under the requested name.
 
 mod chunk;
+mod direct;
 mod ids;
 mod passthrough;
 mod raw;
@@ -183,6 +184,10 @@ pub enum Copied {
 /// Buffer between the writer and the file.
 const FILE_BUFFER_BYTES: usize = 1 << 20;
 
+/// The output's direct writes (`direct.rs`), bytes: a few chunks' worth,
+/// so that each is one large request to the disk.
+const DIRECT_BLOCK_BYTES: usize = 8 << 20;
+
 impl OutputWriter {
     /// Create the temporary output beside `final_path` and register every input
     /// schema and channel under its own id; every record will be written anew.
@@ -214,7 +219,7 @@ impl OutputWriter {
         let (target, file) = TempOutput::create(final_path, options.force)?;
         let file = BufWriter::with_capacity(
             FILE_BUFFER_BYTES,
-            WritebackFile::new(file, writeback::WRITEBACK_BYTES),
+            WritebackFile::direct(file, writeback::WRITEBACK_BYTES, DIRECT_BLOCK_BYTES),
         );
         let backend = if pass_through {
             let header = mcap::records::Header {
@@ -475,7 +480,11 @@ impl OutputWriter {
             path,
             source: e.into_error(),
         })?;
-        self.target.persist(file.into_file())
+        let file = file.into_file().map_err(|source| OutputError::Finish {
+            path: self.target.final_path().to_path_buf(),
+            source,
+        })?;
+        self.target.persist(file)
     }
 }
 

@@ -17,6 +17,8 @@
 use std::fs::File;
 use std::io::{self, Seek, SeekFrom, Write};
 
+use super::direct::DirectBlocks;
+
 /// Bytes written between two starts of the writeback: a few chunks' worth,
 /// so that each start submits large writes.
 pub(super) const WRITEBACK_BYTES: u64 = 32 << 20;
@@ -30,6 +32,9 @@ pub(super) struct WritebackFile {
     unsubmitted_bytes: u64,
     /// Times the writeback was started.
     starts: u64,
+    /// While the output only grows, its block for the next direct write
+    /// (`direct.rs`); `None` through the page cache.
+    direct: Option<DirectBlocks>,
 }
 
 impl WritebackFile {
@@ -39,12 +44,51 @@ impl WritebackFile {
             every_bytes: every_bytes.max(1),
             unsubmitted_bytes: 0,
             starts: 0,
+            direct: None,
         }
     }
 
-    /// The file, for its final sync and rename.
-    pub(super) fn into_file(self) -> File {
-        self.file
+    /// [`Self::new`], writing past the page cache in blocks of
+    /// `block_bytes` where the file system takes it (`direct.rs`).
+    pub(super) fn direct(mut file: File, every_bytes: u64, block_bytes: usize) -> Self {
+        let direct = DirectBlocks::enable(&mut file, block_bytes);
+        Self {
+            direct,
+            ..Self::new(file, every_bytes)
+        }
+    }
+
+    /// The file, every byte written to it, for its final sync and rename.
+    pub(super) fn into_file(mut self) -> io::Result<File> {
+        self.leave_direct()?;
+        Ok(self.file)
+    }
+
+    /// Whether writes still go past the page cache.
+    #[cfg(test)]
+    fn is_direct(&self) -> bool {
+        self.direct.is_some()
+    }
+
+    /// Through the page cache from here on, what the block holds written.
+    fn leave_direct(&mut self) -> io::Result<()> {
+        match self.direct.take() {
+            Some(direct) => direct.finish(&mut self.file),
+            None => Ok(()),
+        }
+    }
+
+    /// `bytes` into the direct block, the block written when full: how
+    /// many were taken.
+    fn write_direct(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        let Some(direct) = &mut self.direct else {
+            return Ok(0);
+        };
+        let taken = direct.take(bytes);
+        if direct.is_full() && !direct.write_block(&mut self.file)? {
+            self.direct = None;
+        }
+        Ok(taken)
     }
 
     /// Times the writeback was started so far.
@@ -82,24 +126,43 @@ fn start_writeback(_file: &File) {}
 
 impl Write for WritebackFile {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        if self.direct.is_some() {
+            return self.write_direct(buf);
+        }
         let written = self.file.write(buf)?;
         self.count(written);
         Ok(written)
     }
 
     fn write_vectored(&mut self, bufs: &[io::IoSlice<'_>]) -> io::Result<usize> {
+        if self.direct.is_some() {
+            // The first non-empty slice (as `Write`'s own default does).
+            let first = bufs.iter().find(|b| !b.is_empty()).map_or(&[][..], |b| b);
+            return self.write_direct(first);
+        }
         let written = self.file.write_vectored(bufs)?;
         self.count(written);
         Ok(written)
     }
 
+    /// Every byte handed to the file: the direct block's through the page
+    /// cache, and no direct write after (only the end of a run flushes).
     fn flush(&mut self) -> io::Result<()> {
+        self.leave_direct()?;
         self.file.flush()
     }
 }
 
 impl Seek for WritebackFile {
+    /// Through the page cache after a seek (a patch of what was written,
+    /// at no block's boundary).
     fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
+        // Where the output stands (`stream_position`, which writers ask as
+        // they go): the file's offset plus what the block holds.
+        if let (SeekFrom::Current(0), Some(direct)) = (pos, &self.direct) {
+            return Ok(self.file.stream_position()? + direct.held() as u64);
+        }
+        self.leave_direct()?;
         self.file.seek(pos)
     }
 }
@@ -108,6 +171,56 @@ impl Seek for WritebackFile {
 mod tests {
     use super::*;
     use std::io::Read;
+
+    /// Written past the page cache in whole blocks where the file system
+    /// takes it (ext4, xfs; tmpfs may refuse it, and then the cache takes
+    /// every write): every byte reaches the file as written, through blocks
+    /// filled across writes, a seek back into the first block (after which
+    /// the cache takes the rest) and a tail shorter than a block.
+    #[test]
+    fn writes_every_byte_past_the_cache_in_blocks_then_through_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.bin");
+        let block = 8192;
+        let mut file = WritebackFile::direct(File::create(&path).unwrap(), 1 << 20, block);
+        let direct_at_start = file.is_direct();
+        let data: Vec<u8> = (0..30_000u32).map(|i| (i % 251) as u8).collect();
+        for piece in data.chunks(700) {
+            file.write_all(piece).unwrap();
+        }
+        // Three whole blocks written directly, with no fallback.
+        assert_eq!(file.is_direct(), direct_at_start);
+        file.seek(SeekFrom::Start(10)).unwrap();
+        assert!(!file.is_direct());
+        file.write_all(&[7, 7]).unwrap();
+        file.seek(SeekFrom::End(0)).unwrap();
+        file.write_all(&[9; 5]).unwrap();
+        let file = file.into_file().unwrap();
+        file.sync_all().unwrap();
+        drop(file);
+        let mut expected = data;
+        expected[10..12].copy_from_slice(&[7, 7]);
+        expected.extend([9; 5]);
+        let mut read = Vec::new();
+        File::open(&path).unwrap().read_to_end(&mut read).unwrap();
+        assert_eq!(read, expected);
+    }
+
+    /// A direct file's bytes held in its block when it is taken for the
+    /// final sync (no flush first, as `BufWriter::into_inner` leaves it)
+    /// are written then.
+    #[test]
+    fn a_direct_files_last_partial_block_is_written_when_it_is_taken() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.bin");
+        let mut file = WritebackFile::direct(File::create(&path).unwrap(), 1 << 20, 4096);
+        let data: Vec<u8> = (0..10_000u32).map(|i| (i % 13) as u8).collect();
+        file.write_all(&data).unwrap();
+        let file = file.into_file().unwrap();
+        file.sync_all().unwrap();
+        drop(file);
+        assert_eq!(std::fs::read(&path).unwrap(), data);
+    }
 
     /// Every byte reaches the file as written (through a seek back, as the
     /// mcap writer patches a header), and the writeback is started once per
@@ -126,7 +239,7 @@ mod tests {
         file.write_all(&[7, 7]).unwrap();
         file.seek(SeekFrom::End(0)).unwrap();
         file.write_all(&[9]).unwrap();
-        let file = file.into_file();
+        let file = file.into_file().unwrap();
         file.sync_all().unwrap();
         drop(file);
         let mut expected = data;
