@@ -11,9 +11,10 @@
 //! Only the output's growing part is written so: the last partial block,
 //! and anything after a seek back (the mcap writer patches its header),
 //! go through the page cache as before, as do whole files on a file
-//! system that refuses direct I/O (tmpfs, some network file systems):
-//! there the flag is refused when set, or the first write fails with
-//! `EINVAL`, and the block is written again through the cache.
+//! system that refuses direct I/O (tmpfs before Linux 6.6, some FUSE and
+//! network file systems): there the flag is refused when set, or the
+//! first write fails with `EINVAL`, and the block is written through the
+//! cache.
 
 use std::fs::File;
 use std::io::{self, Write};
@@ -54,6 +55,14 @@ impl DirectBlocks {
             block_bytes,
             len: 0,
         })
+    }
+
+    /// The block moved a byte off its alignment, for the tests to make a
+    /// direct write fail as a file system that refuses it does.
+    #[cfg(test)]
+    pub(super) fn misaligned(mut self) -> Self {
+        self.start = if self.start > 0 { self.start - 1 } else { 1 };
+        self
     }
 
     /// As much of `bytes` as the block has room for, copied into it: how
