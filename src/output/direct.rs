@@ -8,13 +8,15 @@
 //! 430 MB in about 0.45 s), more than our own chunks' compression costs
 //! per byte. A direct write hands the block to the disk instead, and the
 //! writer's thread waits for the device rather than spending a core.
-//! Only the output's growing part is written so: the last partial block,
-//! and anything after a seek back (the mcap writer patches its header),
-//! go through the page cache as before, as do whole files on a file
-//! system that refuses direct I/O (tmpfs before Linux 6.6, some FUSE and
-//! network file systems): there the flag is refused when set, or the
-//! first write fails with `EINVAL`, and the block is written through the
-//! cache.
+//! The rewrite writer goes back to patch each chunk's header: a patch is
+//! made in the block where it still holds those bytes, else through a
+//! second handle on the file without the flag (a few bytes through the
+//! page cache, below every later direct write). The last partial block
+//! goes through the page cache, as do the writes after a seek past the
+//! end, and whole files on a file system that refuses direct I/O (tmpfs
+//! before Linux 6.6, some FUSE and network file systems): there the flag
+//! is refused when set, or the first write fails with `EINVAL`, and the
+//! block is written through the cache.
 
 use std::fs::File;
 use std::io::{self, Write};
@@ -32,6 +34,11 @@ pub(super) struct DirectBlocks {
     block_bytes: usize,
     /// Bytes held.
     len: usize,
+    /// Bytes of the output before the block's (written directly).
+    flushed: u64,
+    /// A second handle on the file, through the page cache, for patches of
+    /// what the disk already holds ([`Self::patch`]); opened when needed.
+    patcher: Option<File>,
 }
 
 impl DirectBlocks {
@@ -54,7 +61,43 @@ impl DirectBlocks {
             start,
             block_bytes,
             len: 0,
+            flushed: offset,
+            patcher: None,
         })
+    }
+
+    /// The output's length so far: written and held.
+    pub(super) fn end(&self) -> u64 {
+        self.flushed + self.len as u64
+    }
+
+    /// `bytes` written over the output from `at` (a patch of what was
+    /// written: the mcap writer's chunk headers, `at + bytes.len()` at most
+    /// [`Self::end`]): into the block where it holds them, else through a
+    /// second handle on `file` without `O_DIRECT` (a few bytes, through
+    /// the page cache: the next direct writes lie beyond them). An error
+    /// where the file cannot be opened again; nothing is written then.
+    pub(super) fn patch(&mut self, file: &File, at: u64, bytes: &[u8]) -> io::Result<()> {
+        let len = bytes.len() as u64;
+        if at.checked_add(len).is_none_or(|stop| stop > self.end()) {
+            return Err(io::Error::other("a patch past the output's end"));
+        }
+        // The part the disk holds, then the part the block holds.
+        let on_disk = (self.flushed.saturating_sub(at)).min(len) as usize;
+        if on_disk > 0 {
+            if self.patcher.is_none() {
+                self.patcher = Some(reopened(file)?);
+            }
+            if let Some(patcher) = &self.patcher {
+                write_all_at(patcher, &bytes[..on_disk], at)?;
+            }
+        }
+        if on_disk < bytes.len() {
+            // From the block's start where the patch began on the disk.
+            let from = self.start + (at + on_disk as u64 - self.flushed) as usize;
+            self.storage[from..from + bytes.len() - on_disk].copy_from_slice(&bytes[on_disk..]);
+        }
+        Ok(())
     }
 
     /// The block moved a byte off its alignment, for the tests to make a
@@ -74,11 +117,6 @@ impl DirectBlocks {
         self.storage[at..at + taken].copy_from_slice(&bytes[..taken]);
         self.len += taken;
         taken
-    }
-
-    /// Bytes held, not yet written.
-    pub(super) fn held(&self) -> usize {
-        self.len
     }
 
     pub(super) fn is_full(&self) -> bool {
@@ -102,12 +140,14 @@ impl DirectBlocks {
                     // the rest through the cache, and no more direct writes.
                     set_direct(file, false);
                     file.write_all(&block[written..])?;
+                    self.flushed += self.len as u64;
                     self.len = 0;
                     return Ok(false);
                 }
                 Err(e) => return Err(e),
             }
         }
+        self.flushed += self.len as u64;
         self.len = 0;
         Ok(true)
     }
@@ -118,6 +158,33 @@ impl DirectBlocks {
         set_direct(file, false);
         file.write_all(&self.storage[self.start..self.start + self.len])
     }
+}
+
+/// `file` opened again for writing, as a new open file (without the
+/// first's `O_DIRECT`).
+#[cfg(target_os = "linux")]
+fn reopened(file: &File) -> io::Result<File> {
+    use std::os::fd::AsRawFd;
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(format!("/proc/self/fd/{}", file.as_raw_fd()))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn reopened(_file: &File) -> io::Result<File> {
+    Err(io::ErrorKind::Unsupported.into())
+}
+
+/// `bytes` written into `file` at offset `at`, its own offset untouched.
+#[cfg(unix)]
+fn write_all_at(file: &File, bytes: &[u8], at: u64) -> io::Result<()> {
+    use std::os::unix::fs::FileExt;
+    file.write_all_at(bytes, at)
+}
+
+#[cfg(not(unix))]
+fn write_all_at(_file: &File, _bytes: &[u8], _at: u64) -> io::Result<()> {
+    Err(io::ErrorKind::Unsupported.into())
 }
 
 /// `O_DIRECT` set on (or cleared from) `file`'s open flags: whether that

@@ -100,7 +100,7 @@ pub enum OutputError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("{path}: writing failed: {source}")]
+    #[error("{path}: writing failed: {}", with_io_cause(source))]
     Write {
         path: PathBuf,
         source: mcap::McapError,
@@ -119,6 +119,16 @@ pub enum OutputError {
     NoFreeId { path: PathBuf, what: &'static str },
     #[error("{path}: an input record to copy as it is reached a writer that rewrites the input")]
     CopyNeedsPassThrough { path: PathBuf },
+}
+
+/// An mcap writer's error with the system's word where it is one (the
+/// crate's own text for an I/O error does not say which: a full disk must
+/// say so).
+fn with_io_cause(error: &mcap::McapError) -> String {
+    match error {
+        mcap::McapError::Io(cause) => format!("{error}: {cause}"),
+        other => other.to_string(),
+    }
 }
 
 /// Refuse `output` when it is `input` (same file, whatever the spelling) or

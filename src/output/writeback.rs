@@ -35,6 +35,9 @@ pub(super) struct WritebackFile {
     /// While the output only grows, its block for the next direct write
     /// (`direct.rs`); `None` through the page cache.
     direct: Option<DirectBlocks>,
+    /// While writing directly, where a seek back set the next writes (a
+    /// patch of what was written); `None` at the output's end.
+    patch_at: Option<u64>,
 }
 
 impl WritebackFile {
@@ -45,6 +48,7 @@ impl WritebackFile {
             unsubmitted_bytes: 0,
             starts: 0,
             direct: None,
+            patch_at: None,
         }
     }
 
@@ -70,12 +74,39 @@ impl WritebackFile {
         self.direct.is_some()
     }
 
-    /// Through the page cache from here on, what the block holds written.
+    /// Through the page cache from here on, what the block holds written
+    /// (and the file's offset where a patch left the writes).
     fn leave_direct(&mut self) -> io::Result<()> {
-        match self.direct.take() {
-            Some(direct) => direct.finish(&mut self.file),
-            None => Ok(()),
+        if let Some(direct) = self.direct.take() {
+            direct.finish(&mut self.file)?;
         }
+        if let Some(at) = self.patch_at.take() {
+            self.file.seek(SeekFrom::Start(at))?;
+        }
+        Ok(())
+    }
+
+    /// While writing directly and a seek back set the writes at `at`:
+    /// `bytes` over what was written there, as far as the output's end
+    /// (`Ok(None)` at the end: the caller appends). Where the patch
+    /// cannot be made so, the writes leave direct I/O and go on at `at`.
+    fn write_patch(&mut self, at: u64, bytes: &[u8]) -> io::Result<Option<usize>> {
+        let Some(direct) = &mut self.direct else {
+            return Ok(None);
+        };
+        let end = direct.end();
+        let patched = (end.saturating_sub(at)).min(bytes.len() as u64) as usize;
+        if patched == 0 {
+            self.patch_at = None;
+            return Ok(None);
+        }
+        if direct.patch(&self.file, at, &bytes[..patched]).is_err() {
+            self.leave_direct()?;
+            return Ok(Some(self.file.write(bytes)?));
+        }
+        let next = at + patched as u64;
+        self.patch_at = (next < end).then_some(next);
+        Ok(Some(patched))
     }
 
     /// `bytes` into the direct block, the block written when full: how
@@ -126,6 +157,11 @@ fn start_writeback(_file: &File) {}
 
 impl Write for WritebackFile {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        if let Some(at) = self.patch_at
+            && let Some(written) = self.write_patch(at, buf)?
+        {
+            return Ok(written);
+        }
         if self.direct.is_some() {
             return self.write_direct(buf);
         }
@@ -138,7 +174,7 @@ impl Write for WritebackFile {
         if self.direct.is_some() {
             // The first non-empty slice (as `Write`'s own default does).
             let first = bufs.iter().find(|b| !b.is_empty()).map_or(&[][..], |b| b);
-            return self.write_direct(first);
+            return self.write(first);
         }
         let written = self.file.write_vectored(bufs)?;
         self.count(written);
@@ -154,15 +190,28 @@ impl Write for WritebackFile {
 }
 
 impl Seek for WritebackFile {
-    /// Through the page cache after a seek (a patch of what was written,
-    /// at no block's boundary).
+    /// While writing directly, a seek within the output only moves where
+    /// the next writes go (`write_patch`; the mcap rewrite writer goes back
+    /// to each chunk's header, then to the end); a seek past the end takes
+    /// the writes back to the page cache.
     fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
-        // Where the output stands (`stream_position`, which writers ask as
-        // they go): the file's offset plus what the block holds.
-        if let (SeekFrom::Current(0), Some(direct)) = (pos, &self.direct) {
-            return Ok(self.file.stream_position()? + direct.held() as u64);
+        if let Some(direct) = &self.direct {
+            let end = direct.end();
+            let here = self.patch_at.unwrap_or(end);
+            let target = match pos {
+                SeekFrom::Start(at) => Some(at),
+                SeekFrom::Current(by) => here.checked_add_signed(by),
+                SeekFrom::End(by) => end.checked_add_signed(by),
+            };
+            if let Some(at) = target.filter(|&at| at <= end) {
+                self.patch_at = (at < end).then_some(at);
+                return Ok(at);
+            }
+            // Past the end: from the position asked, through the cache.
+            let here = SeekFrom::Start(here);
+            self.leave_direct()?;
+            self.file.seek(here)?;
         }
-        self.leave_direct()?;
         self.file.seek(pos)
     }
 }
@@ -174,35 +223,52 @@ mod tests {
 
     /// Written past the page cache in whole blocks where the file system
     /// takes it (ext4, xfs, tmpfs since Linux 6.6; elsewhere the cache
-    /// takes every write): every byte reaches the file as written, through blocks
-    /// filled across writes, a seek back into the first block (after which
-    /// the cache takes the rest) and a tail shorter than a block.
+    /// takes every write): every byte reaches the file as written, through
+    /// blocks filled across writes, patches as the mcap rewrite writer
+    /// makes them (a seek back, a few bytes, the position asked, a seek to
+    /// the end: into what the disk holds, across the block's start, into
+    /// the block), more blocks after them, a seek past the end (the cache
+    /// from there) and a tail shorter than a block.
     #[test]
-    fn writes_every_byte_past_the_cache_in_blocks_then_through_it() {
+    fn writes_every_byte_past_the_cache_in_blocks_and_patches() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.bin");
         let block = 8192;
         let mut file = WritebackFile::direct(File::create(&path).unwrap(), 1 << 20, block);
         let direct_at_start = file.is_direct();
         let data: Vec<u8> = (0..30_000u32).map(|i| (i % 251) as u8).collect();
+        let mut expected = data.clone();
         for piece in data.chunks(700) {
             file.write_all(piece).unwrap();
         }
-        // Three whole blocks written directly, with no fallback; where
-        // the output stands asked without leaving the direct writes.
+        // Three whole blocks written directly, with no fallback.
         assert_eq!(file.stream_position().unwrap(), 30_000);
+        for (at, patch) in [
+            (10u64, &[7u8, 7][..]),
+            (24_570, &[5; 12]),
+            (29_990, &[3; 10]),
+        ] {
+            file.seek(SeekFrom::Start(at)).unwrap();
+            file.write_all(patch).unwrap();
+            let stop = at as usize + patch.len();
+            assert_eq!(file.stream_position().unwrap(), stop as u64);
+            expected[at as usize..stop].copy_from_slice(patch);
+            assert_eq!(file.seek(SeekFrom::End(0)).unwrap(), 30_000);
+        }
         assert_eq!(file.is_direct(), direct_at_start);
-        file.seek(SeekFrom::Start(10)).unwrap();
+        let more: Vec<u8> = (0..20_000u32).map(|i| (i % 7) as u8).collect();
+        file.write_all(&more).unwrap();
+        expected.extend(&more);
+        assert_eq!(file.is_direct(), direct_at_start);
+        // Past the end: a hole of zeros, then the cache takes the writes.
+        file.seek(SeekFrom::Current(3)).unwrap();
         assert!(!file.is_direct());
-        file.write_all(&[7, 7]).unwrap();
-        file.seek(SeekFrom::End(0)).unwrap();
         file.write_all(&[9; 5]).unwrap();
+        expected.extend([0; 3]);
+        expected.extend([9; 5]);
         let file = file.into_file().unwrap();
         file.sync_all().unwrap();
         drop(file);
-        let mut expected = data;
-        expected[10..12].copy_from_slice(&[7, 7]);
-        expected.extend([9; 5]);
         let mut read = Vec::new();
         File::open(&path).unwrap().read_to_end(&mut read).unwrap();
         assert_eq!(read, expected);
