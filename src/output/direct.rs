@@ -19,7 +19,7 @@
 //! block is written through the cache.
 
 use std::fs::File;
-use std::io::{self, Write};
+use std::io::{self, Seek, SeekFrom, Write};
 
 /// Alignment of a direct write's memory, length and file offset: the
 /// largest logical block size of common devices (most take 512).
@@ -39,6 +39,9 @@ pub(super) struct DirectBlocks {
     /// A second handle on the file, through the page cache, for patches of
     /// what the disk already holds ([`Self::patch`]); opened when needed.
     patcher: Option<File>,
+    /// Where a seek back set the next writes (a patch of what was
+    /// written), always before [`Self::end`]; `None` at the end.
+    patch_at: Option<u64>,
 }
 
 impl DirectBlocks {
@@ -47,7 +50,6 @@ impl DirectBlocks {
     /// not take it, or the file's offset is not at a block's start (only
     /// a fresh file is written so).
     pub(super) fn enable(file: &mut File, block_bytes: usize) -> Option<Self> {
-        use std::io::Seek;
         let offset = file.stream_position().ok()?;
         if !offset.is_multiple_of(ALIGN as u64) || !set_direct(file, true) {
             return None;
@@ -63,12 +65,56 @@ impl DirectBlocks {
             len: 0,
             flushed: offset,
             patcher: None,
+            patch_at: None,
         })
     }
 
     /// The output's length so far: written and held.
-    pub(super) fn end(&self) -> u64 {
+    fn end(&self) -> u64 {
         self.flushed + self.len as u64
+    }
+
+    /// Where the next write goes.
+    pub(super) fn position(&self) -> u64 {
+        self.patch_at.unwrap_or(self.end())
+    }
+
+    /// Where the next writes go moved within the output (the mcap rewrite
+    /// writer goes back to each chunk's header, then to the end): the new
+    /// position; `None`, and nothing moved, past the end.
+    pub(super) fn seek(&mut self, pos: SeekFrom) -> Option<u64> {
+        let end = self.end();
+        let at = match pos {
+            SeekFrom::Start(at) => Some(at),
+            SeekFrom::Current(by) => self.position().checked_add_signed(by),
+            SeekFrom::End(by) => end.checked_add_signed(by),
+        }
+        .filter(|&at| at <= end)?;
+        self.patch_at = (at < end).then_some(at);
+        Some(at)
+    }
+
+    /// `bytes` written at the position: over what was written there, as
+    /// far as the end, where a seek set it back; else into the block, the
+    /// block written to `file` when full. How many were taken, and whether
+    /// the writes stay direct: where not (the file system refused the
+    /// block, or a patch could not be made), the caller leaves direct
+    /// writes ([`Self::finish`]) and writes the rest through the cache.
+    pub(super) fn write(&mut self, file: &mut File, bytes: &[u8]) -> io::Result<(usize, bool)> {
+        if let Some(at) = self.patch_at {
+            let patched = (self.end() - at).min(bytes.len() as u64) as usize;
+            // (Where the file cannot be opened again nothing was written:
+            // the cache takes the patch.)
+            if self.patch(file, at, &bytes[..patched]).is_err() {
+                return Ok((0, false));
+            }
+            let next = at + patched as u64;
+            self.patch_at = (next < self.end()).then_some(next);
+            return Ok((patched, true));
+        }
+        let taken = self.take(bytes);
+        let direct = !self.is_full() || self.write_block(file)?;
+        Ok((taken, direct))
     }
 
     /// `bytes` written over the output from `at` (a patch of what was
@@ -77,7 +123,7 @@ impl DirectBlocks {
     /// second handle on `file` without `O_DIRECT` (a few bytes, through
     /// the page cache: the next direct writes lie beyond them). An error
     /// where the file cannot be opened again; nothing is written then.
-    pub(super) fn patch(&mut self, file: &File, at: u64, bytes: &[u8]) -> io::Result<()> {
+    fn patch(&mut self, file: &File, at: u64, bytes: &[u8]) -> io::Result<()> {
         let len = bytes.len() as u64;
         if at.checked_add(len).is_none_or(|stop| stop > self.end()) {
             return Err(io::Error::other("a patch past the output's end"));
@@ -110,7 +156,7 @@ impl DirectBlocks {
 
     /// As much of `bytes` as the block has room for, copied into it: how
     /// many.
-    pub(super) fn take(&mut self, bytes: &[u8]) -> usize {
+    fn take(&mut self, bytes: &[u8]) -> usize {
         let room = self.block_bytes - self.len;
         let taken = room.min(bytes.len());
         let at = self.start + self.len;
@@ -119,7 +165,7 @@ impl DirectBlocks {
         taken
     }
 
-    pub(super) fn is_full(&self) -> bool {
+    fn is_full(&self) -> bool {
         self.len == self.block_bytes
     }
 
@@ -127,7 +173,7 @@ impl DirectBlocks {
     /// the file system refuses the direct write (`EINVAL`), through the
     /// page cache with the flag cleared: `Ok(false)`, and the caller
     /// writes on without a block.
-    pub(super) fn write_block(&mut self, file: &mut File) -> io::Result<bool> {
+    fn write_block(&mut self, file: &mut File) -> io::Result<bool> {
         let block = &self.storage[self.start..self.start + self.len];
         let mut written = 0;
         while written < block.len() {
@@ -152,11 +198,16 @@ impl DirectBlocks {
         Ok(true)
     }
 
-    /// Back to the page cache: the flag cleared and what the block holds
-    /// (less than a block) written through it.
+    /// Back to the page cache: the flag cleared, what the block holds
+    /// (less than a block) written through it, and the file's offset at
+    /// the position (where a patch left the writes).
     pub(super) fn finish(self, file: &mut File) -> io::Result<()> {
         set_direct(file, false);
-        file.write_all(&self.storage[self.start..self.start + self.len])
+        file.write_all(&self.storage[self.start..self.start + self.len])?;
+        if let Some(at) = self.patch_at {
+            file.seek(SeekFrom::Start(at))?;
+        }
+        Ok(())
     }
 }
 

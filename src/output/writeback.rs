@@ -32,12 +32,10 @@ pub(super) struct WritebackFile {
     unsubmitted_bytes: u64,
     /// Times the writeback was started.
     starts: u64,
-    /// While the output only grows, its block for the next direct write
-    /// (`direct.rs`); `None` through the page cache.
+    /// While written past the page cache, its block for the next direct
+    /// write and where the writes go (`direct.rs`); `None` through the
+    /// page cache.
     direct: Option<DirectBlocks>,
-    /// While writing directly, where a seek back set the next writes (a
-    /// patch of what was written); `None` at the output's end.
-    patch_at: Option<u64>,
 }
 
 impl WritebackFile {
@@ -48,7 +46,6 @@ impl WritebackFile {
             unsubmitted_bytes: 0,
             starts: 0,
             direct: None,
-            patch_at: None,
         }
     }
 
@@ -75,51 +72,12 @@ impl WritebackFile {
     }
 
     /// Through the page cache from here on, what the block holds written
-    /// (and the file's offset where a patch left the writes).
+    /// (`DirectBlocks::finish`).
     fn leave_direct(&mut self) -> io::Result<()> {
-        if let Some(direct) = self.direct.take() {
-            direct.finish(&mut self.file)?;
+        match self.direct.take() {
+            Some(direct) => direct.finish(&mut self.file),
+            None => Ok(()),
         }
-        if let Some(at) = self.patch_at.take() {
-            self.file.seek(SeekFrom::Start(at))?;
-        }
-        Ok(())
-    }
-
-    /// While writing directly and a seek back set the writes at `at`:
-    /// `bytes` over what was written there, as far as the output's end
-    /// (`Ok(None)` at the end: the caller appends). Where the patch
-    /// cannot be made so, the writes leave direct I/O and go on at `at`.
-    fn write_patch(&mut self, at: u64, bytes: &[u8]) -> io::Result<Option<usize>> {
-        let Some(direct) = &mut self.direct else {
-            return Ok(None);
-        };
-        let end = direct.end();
-        let patched = (end.saturating_sub(at)).min(bytes.len() as u64) as usize;
-        if patched == 0 {
-            self.patch_at = None;
-            return Ok(None);
-        }
-        if direct.patch(&self.file, at, &bytes[..patched]).is_err() {
-            self.leave_direct()?;
-            return Ok(Some(self.file.write(bytes)?));
-        }
-        let next = at + patched as u64;
-        self.patch_at = (next < end).then_some(next);
-        Ok(Some(patched))
-    }
-
-    /// `bytes` into the direct block, the block written when full: how
-    /// many were taken.
-    fn write_direct(&mut self, bytes: &[u8]) -> io::Result<usize> {
-        let Some(direct) = &mut self.direct else {
-            return Ok(0);
-        };
-        let taken = direct.take(bytes);
-        if direct.is_full() && !direct.write_block(&mut self.file)? {
-            self.direct = None;
-        }
-        Ok(taken)
     }
 
     /// Times the writeback was started so far.
@@ -157,13 +115,14 @@ fn start_writeback(_file: &File) {}
 
 impl Write for WritebackFile {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        if let Some(at) = self.patch_at
-            && let Some(written) = self.write_patch(at, buf)?
-        {
-            return Ok(written);
-        }
-        if self.direct.is_some() {
-            return self.write_direct(buf);
+        if let Some(direct) = &mut self.direct {
+            let (taken, still_direct) = direct.write(&mut self.file, buf)?;
+            if !still_direct {
+                self.leave_direct()?;
+            }
+            if taken > 0 || buf.is_empty() {
+                return Ok(taken);
+            }
         }
         let written = self.file.write(buf)?;
         self.count(written);
@@ -191,26 +150,14 @@ impl Write for WritebackFile {
 
 impl Seek for WritebackFile {
     /// While writing directly, a seek within the output only moves where
-    /// the next writes go (`write_patch`; the mcap rewrite writer goes back
-    /// to each chunk's header, then to the end); a seek past the end takes
-    /// the writes back to the page cache.
+    /// the next writes go (`DirectBlocks::seek`); a seek past the end takes
+    /// the writes back to the page cache, from where they stood.
     fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
-        if let Some(direct) = &self.direct {
-            let end = direct.end();
-            let here = self.patch_at.unwrap_or(end);
-            let target = match pos {
-                SeekFrom::Start(at) => Some(at),
-                SeekFrom::Current(by) => here.checked_add_signed(by),
-                SeekFrom::End(by) => end.checked_add_signed(by),
-            };
-            if let Some(at) = target.filter(|&at| at <= end) {
-                self.patch_at = (at < end).then_some(at);
+        if let Some(direct) = &mut self.direct {
+            if let Some(at) = direct.seek(pos) {
                 return Ok(at);
             }
-            // Past the end: from the position asked, through the cache.
-            let here = SeekFrom::Start(here);
             self.leave_direct()?;
-            self.file.seek(here)?;
         }
         self.file.seek(pos)
     }
